@@ -1,0 +1,1 @@
+"""ihm package."""

@@ -1,0 +1,114 @@
+"""One entry point, many methods: ``solve(grasp, query, method=...)``.
+
+Methods register themselves with :func:`register`, declaring which query types
+and grasp kinds they answer, like ``qpsolvers.solve_qp(..., solver=...)``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import GraspError, MethodError
+from .grasp import Grasp
+from .queries import Existence, MaxDisturbance, OptimalCommands, Query
+from .solution import Solution
+
+__all__ = ["solve", "register", "available_methods", "MethodInfo"]
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """What a registered method can answer."""
+
+    name: str
+    fn: Callable[..., Solution]
+    queries: tuple[type, ...]
+    planar: bool
+    spatial: bool
+    hand: bool  # answers grasps with a hand model (J, R) and commands
+    summary: str
+
+    def refuses(self, grasp: Grasp, query: Query) -> str | None:
+        """Why this method cannot answer, or None when it can."""
+        if not isinstance(query, self.queries):
+            return f"does not answer {type(query).__name__} queries"
+        if grasp.planar and not self.planar:
+            return "does not handle planar grasps"
+        if not grasp.planar and not self.spatial:
+            return "handles planar grasps only"
+        has_hand = grasp.J is not None or getattr(query, "commands", None) is not None
+        if has_hand and not self.hand:
+            return "models a rigid hand only (no J, R or actuator commands)"
+        return None
+
+
+_METHODS: dict[str, MethodInfo] = {}
+
+
+def register(
+    name: str,
+    queries: tuple[type, ...],
+    planar: bool,
+    spatial: bool,
+    hand: bool = False,
+    summary: str = "",
+) -> Callable[[Callable[..., Solution]], Callable[..., Solution]]:
+    """Decorator: add a solver function ``fn(grasp, query, **options) -> Solution``."""
+
+    def deco(fn: Callable[..., Solution]) -> Callable[..., Solution]:
+        _METHODS[name] = MethodInfo(name, fn, queries, planar, spatial, hand, summary)
+        return fn
+
+    return deco
+
+
+def available_methods(grasp: Grasp | None = None, query: Query | None = None) -> list[str]:
+    """Names of registered methods, optionally only those that can answer ``query`` on ``grasp``."""
+    if grasp is None or query is None:
+        return sorted(_METHODS)
+    return sorted(n for n, info in _METHODS.items() if info.refuses(grasp, query) is None)
+
+
+def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any) -> Solution:
+    """Answer ``query`` about ``grasp`` with ``method``.
+
+    ``method=None`` picks ``"planar"`` for planar grasps. ``stats["time_s"]``
+    is the wall time of the method call [s].
+
+    Raises
+    ------
+    MethodError
+        Unknown method, or one that cannot answer this query on this grasp;
+        the message names the methods that can.
+    GraspError
+        Invalid query data (shapes, NaN, negative preload, ...).
+    """
+    if not isinstance(grasp, Grasp):
+        raise GraspError(f"grasp must be a stability.Grasp, got {type(grasp).__name__}")
+    if not isinstance(query, Existence | MaxDisturbance | OptimalCommands):
+        raise GraspError(
+            "query must be Existence, MaxDisturbance or OptimalCommands, "
+            f"got {type(query).__name__}"
+        )
+    if method is None:
+        method = "planar" if grasp.planar else "refinement"
+    info = _METHODS.get(method)
+    able = available_methods(grasp, query)
+    if info is None:
+        raise MethodError(
+            f"unknown method {method!r}; methods that can answer this "
+            f"{type(query).__name__} query: {able or 'none yet'} (registered: {sorted(_METHODS)})"
+        )
+    reason = info.refuses(grasp, query)
+    if reason is not None:
+        raise MethodError(
+            f"method {method!r} {reason}; methods that can answer this "
+            f"{type(query).__name__} query on this grasp: {able or 'none yet'}"
+        )
+    t0 = time.perf_counter()
+    sol = info.fn(grasp, query, **options)
+    sol.stats["time_s"] = time.perf_counter() - t0
+    return sol

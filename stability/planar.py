@@ -1,0 +1,510 @@
+"""Planar passive grasp stability in polynomial time (thesis chapter 4).
+
+Model (rigid hand, point contacts with friction, thesis sec. 2dmodel): object
+motion ``r = (x, y, theta)``; contact motion ``d = G^T r``, per contact
+``d_n = N_i r`` and ``d_t = T_i r`` with ``N_i = [n_i, p_i x n_i]`` and
+``T_i = [t_i, p_i x t_i]``. Unit virtual springs with preload ``p_i``:
+
+* persist: ``d_n - p <= 0`` and ``c_n = p - d_n``; detach: ``d_n - p >= 0``, ``c_n = 0``;
+* roll: ``d_t = 0``, ``|c_t| <= mu c_n``; slip+: ``d_t >= 0``, ``c_t = -mu c_n``;
+  slip-: ``d_t <= 0``, ``c_t = mu c_n`` (maximum dissipation);
+* equilibrium ``G c + w = 0``.
+
+Inequalities are closed: on a boundary both neighbouring states give the same
+forces, so a solution found for either is a solution of the model.
+
+Algorithm (thesis Alg. complete, with exact geometry instead of one LP per
+enumeration step): the candidate contact states are the faces of the
+arrangement of the ``m`` central tangential planes (slip states, all faces) and
+the ``m`` affine normal planes (detachment states, regions only), enumerated
+*jointly* so that only combinations that co-occur for some motion ``r`` are
+formed (see :mod:`stability._arrangement`). For every candidate state the
+equations are linear in ``r`` restricted to the slip face plus the free
+friction forces of rolling contacts; they reduce to a 3 x 3 system
+``M z = -h - s d`` solved in batch (eq. linear_system), and the state's
+inequalities are checked. States whose system is singular or has more than
+three unknowns get the LP of the thesis (HiGHS). Stable iff some state admits
+a solution. ``MaxDisturbance`` is exact: along ``w = s d`` each state's
+solution is affine in ``s``, so its inequalities give an interval of ``s``
+(an LP for singular states); the answer is the largest stable ``s``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._arrangement import affine_faces, central_faces, dedupe_planes
+from ._lp import INF, solve_lp
+from .api import register
+from .errors import GraspError, MethodError
+from .grasp import Grasp, cross2
+from .queries import Existence, MaxDisturbance
+from .solution import Solution
+
+__all__ = [
+    "slip_states",
+    "detachment_states",
+    "contact_states",
+    "count_slip_faces",
+    "motion_planes",
+]
+
+STATE_NAMES = {(1, 0): "roll", (1, 1): "slip+", (1, -1): "slip-"}
+
+
+def motion_planes(grasp: Grasp) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rows ``T_i``, ``N_i`` (each (m, 3)) with ``d_t = T r`` and ``d_n = N r``."""
+    _require_planar(grasp)
+    p, n, t = grasp.points, grasp.normals, grasp.tangents[:, 0, :]
+    T = np.concatenate([t, cross2(p, t)[:, None]], axis=1)
+    N = np.concatenate([n, cross2(p, n)[:, None]], axis=1)
+    return T, N
+
+
+def _require_planar(grasp: Grasp) -> None:
+    if not isinstance(grasp, Grasp):
+        raise GraspError(f"expected a stability.Grasp, got {type(grasp).__name__}")
+    if not grasp.planar:
+        raise MethodError("the planar method needs a planar grasp (points of shape (m, 2))")
+
+
+def slip_states(grasp: Grasp) -> NDArray[np.int8]:
+    """Every slip state consistent with a rigid motion of the object: (K, m) in {-1, 0, 1}.
+
+    ``+1``/``-1``: the contact slips in the +t / -t direction (``d_t > 0`` /
+    ``< 0``), ``0``: it rolls. Rows are the distinct sign vectors of the faces
+    (regions, facets, lines, origin) of the central arrangement of the planes
+    ``T_i r = 0``, computed exactly on the sphere in ``O(m^2 log m)`` plus
+    ``O(m^3)`` sign evaluations; the first row is the all-rolling state. For
+    ``m >= 3`` generic contacts ``K = 4m^2 - 4m + 2`` (thesis table) ``+ 1``
+    (the all-rolling state, which we count). For ``m = 2`` the two opposite
+    lines where both contacts roll share the all-rolling sign vector, so
+    ``K = 9``; :func:`count_slip_faces` counts faces and gives the thesis' 10.
+    """
+    T, _ = motion_planes(grasp)
+    Au, _, idx, orient = dedupe_planes(T, np.zeros(len(T)))
+    faces = central_faces(Au)
+    S = faces[:, idx] * orient
+    S = np.unique(S, axis=0)
+    zero = np.flatnonzero(~S.any(axis=1))
+    order = np.concatenate([zero, np.flatnonzero(S.any(axis=1))])
+    return S[order]
+
+
+def count_slip_faces(grasp: Grasp) -> dict[str, int]:
+    """Faces of the tangential-plane arrangement by dimension (thesis sec. state_number).
+
+    ``regions`` (3-faces, all contacts slip), ``facets`` (2-faces), ``lines``
+    (1-faces, counted as rays from the origin) and ``origin`` (1 when the
+    planes meet only at the origin). ``total`` = regions + facets + lines is
+    the thesis' ``#(S)``: ``4m^2 - 4m + 2`` for generic contacts.
+    """
+    T, _ = motion_planes(grasp)
+    Au, _, _, _ = dedupe_planes(T, np.zeros(len(T)))
+    faces = central_faces(Au)
+    rank_all = np.linalg.matrix_rank(Au)
+    counts = {"regions": 0, "facets": 0, "lines": 0, "origin": 0}
+    for f in faces:
+        z = np.flatnonzero(f == 0)
+        dim = 3 - (np.linalg.matrix_rank(Au[z]) if len(z) else 0)
+        if len(z) == len(Au):  # the all-rolling face: origin, or the common line
+            if rank_all == 3:
+                counts["origin"] += 1
+            elif rank_all == 2:
+                counts["lines"] += 2
+            continue
+        counts[{3: "regions", 2: "facets", 1: "lines"}[dim]] += 1
+    counts["total"] = counts["regions"] + counts["facets"] + counts["lines"]
+    return counts
+
+
+def _preload(grasp: Grasp, preload: Any) -> NDArray[np.float64]:
+    return grasp.per_contact(preload, "preload")
+
+
+def detachment_states(
+    grasp: Grasp, preload: float | NDArray[np.float64] | None = None
+) -> NDArray[np.int8]:
+    """Detachment states: (K, m) with 1 = contact persists, 0 = detaches (thesis ``U_k``).
+
+    The regions of the affine arrangement ``N_i r = p_i`` (closed on the
+    persist side). With preload the planes miss the origin, and there are up
+    to ``sum_{k<=3} C(m, k)`` regions; without, ``m(m-1) + 2``.
+    """
+    _, N = motion_planes(grasp)
+    p = _preload(grasp, preload)
+    Au, bu, idx, orient = dedupe_planes(N, p)
+    faces = np.concatenate(list(affine_faces(Au, bu, np.zeros(len(Au), dtype=bool))))
+    U = (faces[:, idx] * orient <= 0).astype(np.int8)
+    return np.unique(U, axis=0)
+
+
+def _planes(grasp: Grasp, p: NDArray[np.float64]):
+    T, N = motion_planes(grasp)
+    m = grasp.m
+    A = np.concatenate([T, N])
+    b = np.concatenate([np.zeros(m), p])
+    Au, bu, idx, orient = dedupe_planes(A, b)
+    may_zero = np.zeros(len(Au), dtype=bool)
+    may_zero[idx[:m]] = True
+    return T, N, Au, bu, idx, orient, may_zero
+
+
+def _state_chunks(
+    grasp: Grasp, p: NDArray[np.float64], chunk: int = 16384
+) -> Iterator[tuple[NDArray[np.int8], NDArray[np.bool_]]]:
+    """Candidate (slip state S, persist mask P) chunks co-occurring for some motion."""
+    m = grasp.m
+    _, _, Au, bu, idx, orient, may_zero = _planes(grasp, p)
+    for f in affine_faces(Au, bu, may_zero, chunk=chunk):
+        sv = f[:, idx] * orient
+        yield sv[:, :m], sv[:, m:] <= 0
+
+
+def contact_states(
+    grasp: Grasp, preload: float | NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.int8], NDArray[np.int8]]:
+    """All co-occurring (slip, detachment) state pairs, deduplicated.
+
+    Returns ``(S, U)``, each (K, m): ``S`` in {-1, 0, 1} (slip-, roll, slip+),
+    ``U`` in {0, 1} (detach, persist). This is the set the solver visits
+    (thesis ``T = U x S``, restricted to pairs some motion realises).
+    """
+    _require_planar(grasp)
+    p = _preload(grasp, preload)
+    parts = [np.concatenate([S, P.astype(np.int8)], axis=1) for S, P in _state_chunks(grasp, p)]
+    both = np.unique(np.concatenate(parts), axis=0)
+    return both[:, : grasp.m], both[:, grasp.m :]
+
+
+# ----------------------------------------------------------------------------------------
+# per-state solve
+
+
+@dataclass
+class _Ctx:
+    grasp: Grasp
+    T: NDArray[np.float64]
+    N: NDArray[np.float64]
+    p: NDArray[np.float64]
+    mu: NDArray[np.float64]
+    Gn: NDArray[np.float64]  # (m, 3) wrench of a unit normal force
+    Gt: NDArray[np.float64]  # (m, 3) wrench of a unit tangential force
+    GnN: NDArray[np.float64]  # (m, 9) Gn_i N_i^T flattened
+    GtN: NDArray[np.float64]
+    w0: NDArray[np.float64]  # wrench at s = 0
+    d: NDArray[np.float64]  # wrench per unit s
+    tol: float
+
+    @classmethod
+    def make(cls, grasp: Grasp, p, w0, d) -> _Ctx:
+        T, N = motion_planes(grasp)
+        G = grasp.G
+        Gn, Gt = G[:, 0::2].T.copy(), G[:, 1::2].T.copy()
+        GnN = np.einsum("ia,ib->iab", Gn, N).reshape(-1, 9)
+        GtN = np.einsum("ia,ib->iab", Gt, N).reshape(-1, 9)
+        scale = 1.0 + max(np.abs(w0).max(), np.abs(d).max(), p.max(initial=0.0))
+        return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, w0, d, 1e-9 * scale)
+
+
+def _null_bases(T: NDArray[np.float64], S: NDArray[np.int8]):
+    """Per distinct slip state: orthonormal basis B (3, 3) of {r: T_Z r = 0} (first 3-k cols)."""
+    Su, inv = np.unique(S, axis=0, return_inverse=True)
+    TZ = T[None, :, :] * (Su == 0)[:, :, None]
+    _, sv, Vt = np.linalg.svd(TZ, full_matrices=True)
+    k = (sv > 1e-9).sum(axis=1)
+    # rows of Vt beyond rank k span the null space; put them first
+    B = np.zeros((len(Su), 3, 3))
+    for kk in range(4):
+        sel = k == kk
+        if sel.any() and kk < 3:
+            B[sel, :, : 3 - kk] = Vt[sel, kk:, :].transpose(0, 2, 1)
+    return B[inv.ravel()], (3 - k)[inv.ravel()]
+
+
+def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 0.0):
+    """Affine-in-s candidate solutions of each state's square system.
+
+    Returns ``(r0, r1, ct0, ct1, lp, skip)`` where ``r(s) = r0 + s r1`` and the
+    rolling friction ``ct(s) = ct0 + s ct1`` ((K, m), zero elsewhere); ``lp``
+    masks states needing the LP (singular with solvable equilibrium for some
+    ``s`` in ``[0, s_max]``, or more than 3 unknowns), ``skip`` the singular
+    states whose equilibrium has no solution at all, and ``s_ub`` an upper
+    bound on the stable ``s`` of each LP state.
+    """
+    K, m = S.shape
+    Pf = P.astype(float)
+    PS = Pf * S * ctx.mu
+    Q = (Pf @ ctx.GnN - PS @ ctx.GtN).reshape(K, 3, 3)
+    h = Pf @ (ctx.p[:, None] * ctx.Gn) - PS @ (ctx.p[:, None] * ctx.Gt)
+    B, nmot = _null_bases(ctx.T, S)
+    roll_p = (S == 0) & P
+    nrp = roll_p.sum(axis=1)
+    nu = nmot + nrp
+    M = -np.einsum("kab,kbj->kaj", Q, B)
+    ridx = np.argsort(~roll_p, axis=1, kind="stable")[:, :3]
+    rows = np.arange(K)
+    for j in range(3):
+        col = nmot + j
+        sel = (j < nrp) & (col < 3)
+        M[rows[sel], :, col[sel]] = ctx.Gt[ridx[sel, j]]
+    lp = nu > 3
+    skip = np.zeros(K, dtype=bool)
+    s_ub = np.full(K, s_max)  # upper bound on s for LP states
+    cn = np.linalg.norm(M, axis=1)  # column norms
+    det = np.abs(np.linalg.det(M))
+    square = (~lp) & (nu == 3) & (det > 1e-12 * np.prod(np.maximum(cn, 1e-300), axis=1))
+    rhs0 = -(h + ctx.w0)
+    rhs1 = np.broadcast_to(-ctx.d, (K, 3))
+    Z0 = np.zeros((K, 3))
+    Z1 = np.zeros((K, 3))
+    if square.any():
+        Z = np.linalg.solve(M[square], np.stack([rhs0[square], rhs1[square]], axis=2))
+        Z0[square], Z1[square] = Z[..., 0], Z[..., 1]
+    rest = np.flatnonzero((~lp) & (~square))
+    if len(rest):
+        U_, sv, _ = np.linalg.svd(M[rest])
+        rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
+        full = rank == nu[rest]
+        # rank-deficient: the LP is needed only if equilibrium is solvable for some s,
+        # i.e. rhs0 + s rhs1 lies in range(M) (components e0 + s e1 on its complement vanish)
+        perp = np.arange(3)[None, :] >= rank[:, None]  # left singular vectors off the range
+        e0 = np.einsum("kai,ka->ki", U_, rhs0[rest]) * perp
+        e1 = np.einsum("kai,ka->ki", U_, rhs1[rest]) * perp
+        etol = 1e-9 * (1.0 + np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
+        n1 = (e1**2).sum(axis=1)
+        s_star = np.clip(-(e0 * e1).sum(axis=1) / np.maximum(n1, 1e-300), 0.0, s_max)
+        resid = np.where(
+            n1 > 0, np.abs(e0 + s_star[:, None] * e1).max(axis=1), np.abs(e0).max(axis=1)
+        )
+        lp[rest[~full & (resid <= etol)]] = True
+        s_ub[rest] = np.where(n1 > 0, s_star, s_max)
+        skip[rest[~full & (resid > etol)]] = True
+        ok = rest[full]
+        if len(ok):
+            Mp = np.linalg.pinv(M[ok], rcond=1e-10)
+            Z0[ok] = np.einsum("kij,kj->ki", Mp, rhs0[ok])
+            Z1[ok] = np.einsum("kij,kj->ki", Mp, rhs1[ok])
+    r0 = np.einsum("kij,kj->ki", B, Z0)
+    r1 = np.einsum("kij,kj->ki", B, Z1)
+    ct0 = np.zeros((K, m))
+    ct1 = np.zeros((K, m))
+    for j in range(3):
+        col = nmot + j
+        sel = (j < nrp) & (col < 3) & ~lp
+        ct0[rows[sel], ridx[sel, j]] = Z0[rows[sel], col[sel]]
+        ct1[rows[sel], ridx[sel, j]] = Z1[rows[sel], col[sel]]
+    return r0, r1, ct0, ct1, lp, skip, s_ub
+
+
+def _forces(ctx: _Ctx, S, P, r, ct):
+    """Contact forces (K, m, 2) of states S, P at motion r with rolling friction ct."""
+    cn = np.where(P, ctx.p - r @ ctx.N.T, 0.0)
+    c_t = np.where(S == 0, ct, -ctx.mu * S * cn)
+    return np.stack([cn, c_t], axis=-1)
+
+
+def _constraints(ctx: _Ctx, S, P, r, ct, s):
+    """Stack of quantities that must be >= 0 (up to tol) for the state to hold."""
+    c = _forces(ctx, S, P, r, ct)
+    cn, c_t = c[..., 0], c[..., 1]
+    dT = r @ ctx.T.T
+    dN = r @ ctx.N.T - ctx.p
+    slip_ok = np.where(S != 0, S * dT, 0.0)
+    normal_ok = np.where(P, -dN, dN)
+    roll = (S == 0) & P
+    cone1 = np.where(roll, ctx.mu * cn - c_t, 0.0)
+    cone2 = np.where(roll, ctx.mu * cn + c_t, 0.0)
+    w = ctx.w0 + np.asarray(s)[..., None] * ctx.d
+    eq = cn @ ctx.Gn + c_t @ ctx.Gt + w
+    return np.concatenate([slip_ok, normal_ok, cone1, cone2, eq, -eq], axis=-1)
+
+
+def _names(S, P) -> NDArray[np.str_]:
+    return np.array(
+        ["detach" if not pp else STATE_NAMES[(1, int(ss))] for ss, pp in zip(S, P, strict=True)]
+    )
+
+
+def _lp_state(ctx: _Ctx, S, P, s_bounds: tuple[float, float], sense: int):
+    """The thesis' LP for one state: variables (r, rolling c_t, s); sense +1 max s, -1 min s."""
+    m = len(S)
+    roll_p = np.flatnonzero((S == 0) & P)
+    nr = len(roll_p)
+    nv = 3 + nr + 1
+    rows, lo, hi = [], [], []
+
+    def add(a, lb, ub):
+        rows.append(a)
+        lo.append(lb)
+        hi.append(ub)
+
+    Pf = P.astype(float)
+    Q = ((Pf @ ctx.GnN) - (Pf * S * ctx.mu) @ ctx.GtN).reshape(3, 3)
+    h = Pf @ (ctx.p[:, None] * ctx.Gn) - (Pf * S * ctx.mu) @ (ctx.p[:, None] * ctx.Gt)
+    for a in range(3):  # equilibrium: -Q r + Gt c_t + s d = -h - w0
+        row = np.zeros(nv)
+        row[:3] = -Q[a]
+        row[3 : 3 + nr] = ctx.Gt[roll_p, a]
+        row[-1] = ctx.d[a]
+        add(row, -h[a] - ctx.w0[a], -h[a] - ctx.w0[a])
+    for i in range(m):
+        row = np.zeros(nv)
+        row[:3] = ctx.T[i]
+        if S[i] == 0:
+            add(row, 0.0, 0.0)
+        else:
+            add(S[i] * row, 0.0, INF)
+        row = np.zeros(nv)
+        row[:3] = ctx.N[i]
+        if P[i]:
+            add(row, -INF, ctx.p[i])
+        else:
+            add(row, ctx.p[i], INF)
+    for j, i in enumerate(roll_p):  # |c_t| <= mu (p - N r)
+        for sign in (1.0, -1.0):
+            row = np.zeros(nv)
+            row[:3] = ctx.mu[i] * ctx.N[i]
+            row[3 + j] = sign
+            add(row, -INF, ctx.mu[i] * ctx.p[i])
+    cost = np.zeros(nv)
+    cost[-1] = 1.0 if sense else 0.0
+    lb = np.full(nv, -INF)
+    ub = np.full(nv, INF)
+    lb[-1], ub[-1] = s_bounds
+    ok, x, _ = solve_lp(
+        cost, np.array(rows), np.array(lo), np.array(hi), lb, ub, maximize=sense > 0
+    )
+    if not ok:
+        return None
+    ct = np.zeros(m)
+    ct[roll_p] = x[3 : 3 + nr]
+    return x[:3], ct, float(x[-1])
+
+
+def _solution(grasp, query, ctx, S, P, r, ct, s, stable, value, stats) -> Solution:
+    c = _forces(ctx, S[None], P[None], r[None], ct[None])[0]
+    return Solution(
+        stable=stable,
+        method="planar",
+        grasp=grasp,
+        query=query,
+        forces=c,
+        motion=r,
+        value=value,
+        states=_names(S, P),
+        stats=stats,
+    )
+
+
+@register(
+    "planar",
+    queries=(Existence, MaxDisturbance),
+    planar=True,
+    spatial=False,
+    summary="thesis ch. 4: exact, polynomial-time enumeration of co-occurring states",
+)
+def _solve_planar(
+    grasp: Grasp, query: Existence | MaxDisturbance, chunk: int = 16384, **options: Any
+) -> Solution:
+    if options:
+        raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
+    p = _preload(grasp, query.preload)
+    if isinstance(query, Existence):
+        w = grasp.wrench(query.wrench)
+        return _existence(grasp, query, p, w, chunk)
+    d = grasp.wrench(query.direction, "direction")
+    if not np.any(d):
+        raise GraspError("MaxDisturbance direction must be non-zero")
+    cap = float(query.cap)
+    if not np.isfinite(cap) or cap <= 0:
+        raise GraspError(f"MaxDisturbance cap must be finite and > 0, got {query.cap}")
+    return _max_disturbance(grasp, query, p, d, cap, chunk)
+
+
+def _existence(grasp, query, p, w, chunk) -> Solution:
+    ctx = _Ctx.make(grasp, p, w, np.zeros(3))
+    n_states = n_lp = 0
+    for S, P in _state_chunks(grasp, p, chunk):
+        n_states += len(S)
+        r0, _, ct0, _, lp, skip, _ = _batch(ctx, S, P)
+        g = _constraints(ctx, S, P, r0, ct0, np.zeros(len(S)))
+        tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1, keepdims=True))
+        ok = np.all(g >= -tol, axis=1) & ~lp & ~skip
+        hit = np.flatnonzero(ok)
+        if len(hit):
+            k = hit[0]
+            stats = {"states": n_states, "lps": n_lp}
+            return _solution(grasp, query, ctx, S[k], P[k], r0[k], ct0[k], 0.0, True, None, stats)
+        for k in np.flatnonzero(lp):
+            n_lp += 1
+            res = _lp_state(ctx, S[k], P[k], (0.0, 0.0), sense=0)
+            if res is not None:
+                r, ct, _ = res
+                stats = {"states": n_states, "lps": n_lp}
+                return _solution(grasp, query, ctx, S[k], P[k], r, ct, 0.0, True, None, stats)
+    return Solution(
+        stable=False,
+        method="planar",
+        grasp=grasp,
+        query=query,
+        stats={"states": n_states, "lps": n_lp},
+    )
+
+
+def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
+    ctx = _Ctx.make(grasp, p, np.zeros(3), d)
+    pending: list[tuple[float, NDArray[np.int8], NDArray[np.bool_]]] = []
+    best: tuple[float, Any] = (-1.0, None)
+    n_states = n_lp = 0
+    for S, P in _state_chunks(grasp, p, chunk):
+        n_states += len(S)
+        r0, r1, ct0, ct1, lp, skip, s_ub = _batch(ctx, S, P, cap)
+        K = len(S)
+        g0 = _constraints(ctx, S, P, r0, ct0, np.zeros(K))
+        g1 = _constraints(ctx, S, P, r0 + r1, ct0 + ct1, np.ones(K)) - g0
+        tol = ctx.tol * (
+            1.0 + np.abs(r0).max(axis=1, keepdims=True) + np.abs(r1).max(axis=1, keepdims=True)
+        )
+        # g0 + s g1 >= -tol  ->  bounds on s; the value itself uses the exact bound
+        pos = g1 > 1e-14 * (1.0 + np.abs(g0))
+        neg = g1 < -1e-14 * (1.0 + np.abs(g0))
+        flat = ~pos & ~neg
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slack = (-tol - g0) / g1
+            exact = -g0 / g1
+        lo = np.max(np.where(pos, slack, 0.0), axis=1, initial=0.0)
+        hi = np.min(np.where(neg, slack, cap), axis=1, initial=cap)
+        feas = (lo <= hi) & np.all(~flat | (g0 >= -tol), axis=1) & ~lp & ~skip
+        hi = np.clip(np.min(np.where(neg, exact, cap), axis=1, initial=cap), lo, hi)
+        if feas.any():
+            k = np.flatnonzero(feas)[np.argmax(hi[feas])]
+            if hi[k] > best[0]:
+                s = hi[k]
+                best = (s, (S[k], P[k], r0[k] + s * r1[k], ct0[k] + s * ct1[k]))
+        pending += [(s_ub[k], S[k], P[k]) for k in np.flatnonzero(lp)]
+    # LP states last, most promising first; stop once none can beat the best s
+    pending.sort(key=lambda x: -x[0])
+    for ub, S_k, P_k in pending:
+        if ub <= best[0] + 1e-12 * (1.0 + best[0]):
+            break
+        n_lp += 1
+        res = _lp_state(ctx, S_k, P_k, (0.0, min(ub, cap)), sense=1)
+        if res is not None and res[2] > best[0]:
+            r, ct, s = res
+            best = (s, (S_k, P_k, r, ct))
+    stats: dict[str, Any] = {"states": n_states, "lps": n_lp}
+    if best[1] is None:
+        stats["capped"] = False
+        return Solution(
+            stable=False, method="planar", grasp=grasp, query=query, value=None, stats=stats
+        )
+    value = float(min(best[0], cap))
+    stats["capped"] = bool(value >= cap * (1 - 1e-12))
+    S, P, r, ct = best[1]
+    return _solution(grasp, query, ctx, S, P, r, ct, value, True, value, stats)
