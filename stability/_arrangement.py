@@ -84,11 +84,21 @@ def dedupe_planes(
     return a[reps], beta[reps], index, orient
 
 
-def _circle_basis(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    e = np.eye(3)[np.argmin(np.abs(a))]
-    e1 = np.cross(a, e)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(a, e1)
+def unique_rows(x: NDArray[np.int8]) -> NDArray[np.int8]:
+    """Distinct rows of a small-integer matrix (faster than ``np.unique(axis=0)``)."""
+    if len(x) == 0:
+        return x
+    x = np.ascontiguousarray(x)
+    v = x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
+    _, first = np.unique(v, return_index=True)
+    return x[np.sort(first)]
+
+
+def _circle_bases(A: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    e = np.eye(3)[np.argmin(np.abs(A), axis=1)]
+    e1 = np.cross(A, e)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(A, e1)
 
 
 def central_faces(A: NDArray[np.float64], tol: float = _TOL) -> NDArray[np.int8]:
@@ -98,44 +108,45 @@ def central_faces(A: NDArray[np.float64], tol: float = _TOL) -> NDArray[np.int8]
     :func:`dedupe_planes`). The first row is the origin face (all zeros).
     In general position with ``n >= 2`` planes there are ``n(n-1)+2`` regions,
     ``2n(n-1)`` facets and ``n(n-1)`` lines, ``4n^2 - 4n + 2`` faces besides
-    the origin (thesis Table tab:performance).
+    the origin (thesis Table tab:performance); lines whose sign vectors
+    coincide (``n = 2``: both rays of the one line are all-rolling) appear once.
     """
     A = np.asarray(A, dtype=float)
     n = len(A)
     origin = np.zeros((1, n), dtype=np.int8)
     if n == 0:
         return origin
+    e1, e2 = _circle_bases(A)
+    if n == 1:
+        return np.array([[0], [1], [-1]], dtype=np.int8)
     i, j = np.triu_indices(n, 1)
     X = np.cross(A[i], A[j])
     nrm = np.linalg.norm(X, axis=1)
-    X = X[nrm > tol] / nrm[nrm > tol, None]
-    verts = np.concatenate([X, -X]) if len(X) else np.zeros((0, 3))
-    if len(verts) > 1:  # merge vertices shared by three or more circles
-        q = np.round(verts / 1e-7).astype(np.int64)
-        _, first = np.unique(q, axis=0, return_index=True)
-        verts = verts[np.sort(first)]
-    out = [origin]
-    if len(verts):
-        out.append(signs(verts @ A.T))
-    for k in range(n):
-        e1, e2 = _circle_basis(A[k])
-        on = verts[np.abs(verts @ A[k]) <= 1e-7] if len(verts) else verts
-        if len(on) == 0:
-            pts = e1[None, :]  # a lone great circle is one 2-face
-        else:
-            ang = np.unique(np.round(np.arctan2(on @ e2, on @ e1), 12))
-            nxt = np.roll(ang, -1)
-            nxt[-1] += 2 * np.pi
-            mid = 0.5 * (ang + nxt)
-            pts = np.cos(mid)[:, None] * e1 + np.sin(mid)[:, None] * e2
-        facets = signs(pts @ A.T)
-        facets[:, k] = 0
-        up = facets.copy()
-        up[:, k] = 1
-        down = facets.copy()
-        down[:, k] = -1
-        out += [facets, up, down]
-    return np.unique(np.concatenate(out), axis=0)
+    X = X / nrm[:, None]
+    verts = np.concatenate([X, -X])
+    q = np.round(verts / 1e-7).astype(np.int64)  # merge vertices shared by 3+ circles
+    _, first = np.unique(q, axis=0, return_index=True)
+    verts = verts[np.sort(first)]
+    # arcs: consecutive vertices around every circle
+    on_v, on_k = np.nonzero(np.abs(verts @ A.T) <= 1e-7)
+    ang = np.arctan2(np.einsum("kd,kd->k", verts[on_v], e2[on_k]),
+                     np.einsum("kd,kd->k", verts[on_v], e1[on_k]))
+    order = np.lexsort((ang, on_k))
+    k_s, a_s = on_k[order], ang[order]
+    start = np.flatnonzero(np.r_[True, k_s[1:] != k_s[:-1]])
+    nxt = np.r_[a_s[1:], 0.0]
+    last = np.r_[start[1:], len(k_s)] - 1
+    nxt[last] = a_s[start] + 2 * np.pi
+    mid = 0.5 * (a_s + nxt)
+    pts = np.cos(mid)[:, None] * e1[k_s] + np.sin(mid)[:, None] * e2[k_s]
+    facets = signs(pts @ A.T)
+    r = np.arange(len(k_s))
+    facets[r, k_s] = 0
+    up = facets.copy()
+    up[r, k_s] = 1
+    down = facets.copy()
+    down[r, k_s] = -1
+    return unique_rows(np.concatenate([origin, signs(verts @ A.T), facets, up, down]))
 
 
 @lru_cache(maxsize=64)

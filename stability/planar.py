@@ -158,11 +158,24 @@ def _planes(grasp: Grasp, p: NDArray[np.float64]):
 def _state_chunks(
     grasp: Grasp, p: NDArray[np.float64], chunk: int = 16384
 ) -> Iterator[tuple[NDArray[np.int8], NDArray[np.bool_]]]:
-    """Candidate (slip state S, persist mask P) chunks co-occurring for some motion."""
+    """Candidate (slip state S, persist mask P) chunks co-occurring for some motion.
+
+    Small pieces from the enumeration are merged to about ``chunk`` rows so
+    that the batched solves amortise their overhead.
+    """
     m = grasp.m
     _, _, Au, bu, idx, orient, may_zero = _planes(grasp, p)
+    buf: list[NDArray[np.int8]] = []
+    rows = 0
     for f in affine_faces(Au, bu, may_zero, chunk=chunk):
-        sv = f[:, idx] * orient
+        buf.append(f)
+        rows += len(f)
+        if rows >= chunk:
+            sv = np.concatenate(buf)[:, idx] * orient
+            yield sv[:, :m], sv[:, m:] <= 0
+            buf, rows = [], 0
+    if buf:
+        sv = np.concatenate(buf)[:, idx] * orient
         yield sv[:, :m], sv[:, m:] <= 0
 
 
@@ -197,6 +210,8 @@ class _Ctx:
     Gt: NDArray[np.float64]  # (m, 3) wrench of a unit tangential force
     GnN: NDArray[np.float64]  # (m, 9) Gn_i N_i^T flattened
     GtN: NDArray[np.float64]
+    That: NDArray[np.float64]  # (m, 3) unit rows of T
+    Tperp: NDArray[np.float64]  # (m, 3, 2) orthonormal basis of {r: T_i r = 0}
     w0: NDArray[np.float64]  # wrench at s = 0
     d: NDArray[np.float64]  # wrench per unit s
     tol: float
@@ -209,22 +224,74 @@ class _Ctx:
         GnN = np.einsum("ia,ib->iab", Gn, N).reshape(-1, 9)
         GtN = np.einsum("ia,ib->iab", Gt, N).reshape(-1, 9)
         scale = 1.0 + max(np.abs(w0).max(), np.abs(d).max(), p.max(initial=0.0))
-        return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, w0, d, 1e-9 * scale)
+        That = T / np.linalg.norm(T, axis=1, keepdims=True)
+        Tperp = np.linalg.svd(That[:, None, :])[2][:, 1:, :].transpose(0, 2, 1)
+        return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, That, Tperp, w0, d, 1e-9 * scale)
 
 
-def _null_bases(T: NDArray[np.float64], S: NDArray[np.int8]):
-    """Per distinct slip state: orthonormal basis B (3, 3) of {r: T_Z r = 0} (first 3-k cols)."""
-    Su, inv = np.unique(S, axis=0, return_inverse=True)
-    TZ = T[None, :, :] * (Su == 0)[:, :, None]
-    _, sv, Vt = np.linalg.svd(TZ, full_matrices=True)
-    k = (sv > 1e-9).sum(axis=1)
-    # rows of Vt beyond rank k span the null space; put them first
-    B = np.zeros((len(Su), 3, 3))
-    for kk in range(4):
-        sel = k == kk
-        if sel.any() and kk < 3:
-            B[sel, :, : 3 - kk] = Vt[sel, kk:, :].transpose(0, 2, 1)
-    return B[inv.ravel()], (3 - k)[inv.ravel()]
+def _null_bases(ctx: _Ctx, S: NDArray[np.int8]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Basis ``B`` (K, 3, 3) of ``{r : T_i r = 0 for rolling i}`` in its first ``nmot`` columns.
+
+    Regions, facets and lines (<= 2 rolling contacts) are closed-form; faces
+    with more rolling contacts (the origin, degenerate grasps) use an SVD.
+    """
+    K = len(S)
+    roll = S == 0
+    nroll = roll.sum(axis=1)
+    ridx = np.argsort(~roll, axis=1, kind="stable")[:, :2]
+    B = np.zeros((K, 3, 3))
+    nmot = np.zeros(K, dtype=np.intp)
+    sel = nroll == 0
+    B[sel] = np.eye(3)
+    nmot[sel] = 3
+    sel = np.flatnonzero(nroll == 1)
+    B[sel, :, :2] = ctx.Tperp[ridx[sel, 0]]
+    nmot[sel] = 2
+    sel = np.flatnonzero(nroll == 2)
+    if len(sel):
+        i, j = ridx[sel, 0], ridx[sel, 1]
+        c = np.cross(ctx.That[i], ctx.That[j])
+        nc = np.linalg.norm(c, axis=1)
+        line = nc > 1e-9
+        B[sel[line], :, 0] = c[line] / nc[line, None]
+        nmot[sel[line]] = 1
+        same = sel[~line]  # two contacts on one tangential plane
+        B[same, :, :2] = ctx.Tperp[i[~line]]
+        nmot[same] = 2
+    sel = np.flatnonzero(nroll > 2)
+    if len(sel):
+        TZ = ctx.That[None, :, :] * roll[sel][:, :, None]
+        _, sv, Vt = np.linalg.svd(TZ, full_matrices=True)
+        k = (sv > 1e-9).sum(axis=1)
+        for kk in range(3):
+            sk = k == kk
+            B[sel[sk], :, : 3 - kk] = Vt[sk, kk:, :].transpose(0, 2, 1)
+        nmot[sel] = 3 - k
+    return B, nmot
+
+
+def _complete(M: NDArray[np.float64], nu: NDArray[np.intp]) -> None:
+    """Fill the unused columns (``j >= nu``) of each 3 x 3 system with an orthonormal
+    basis of the complement of its used columns, in place.
+
+    The system then stays square; the extra unknowns are the equilibrium
+    residual off the range of the real columns, which the equilibrium check
+    rejects unless it vanishes. With full column rank the result is nonsingular.
+    """
+    two = np.flatnonzero(nu == 2)
+    if len(two):
+        c = np.cross(M[two, :, 0], M[two, :, 1])
+        M[two, :, 2] = c / np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-300)
+    one = np.flatnonzero(nu == 1)
+    if len(one):
+        a = M[one, :, 0]
+        e = np.eye(3)[np.argmin(np.abs(a), axis=1)]
+        u = np.cross(a, e)
+        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+        v = np.cross(a, u)
+        M[one, :, 1] = u
+        M[one, :, 2] = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+    M[nu == 0] = np.eye(3)
 
 
 def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 0.0):
@@ -242,38 +309,42 @@ def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 
     PS = Pf * S * ctx.mu
     Q = (Pf @ ctx.GnN - PS @ ctx.GtN).reshape(K, 3, 3)
     h = Pf @ (ctx.p[:, None] * ctx.Gn) - PS @ (ctx.p[:, None] * ctx.Gt)
-    B, nmot = _null_bases(ctx.T, S)
+    B, nmot = _null_bases(ctx, S)
     roll_p = (S == 0) & P
     nrp = roll_p.sum(axis=1)
     nu = nmot + nrp
     M = -np.einsum("kab,kbj->kaj", Q, B)
     ridx = np.argsort(~roll_p, axis=1, kind="stable")[:, :3]
+    nslot = ridx.shape[1]
     rows = np.arange(K)
-    for j in range(3):
+    for j in range(nslot):
         col = nmot + j
         sel = (j < nrp) & (col < 3)
         M[rows[sel], :, col[sel]] = ctx.Gt[ridx[sel, j]]
     lp = nu > 3
     skip = np.zeros(K, dtype=bool)
     s_ub = np.full(K, s_max)  # upper bound on s for LP states
-    cn = np.linalg.norm(M, axis=1)  # column norms
-    det = np.abs(np.linalg.det(M))
-    square = (~lp) & (nu == 3) & (det > 1e-12 * np.prod(np.maximum(cn, 1e-300), axis=1))
+    _complete(M, nu)
+    a, b, c = M[:, :, 0], M[:, :, 1], M[:, :, 2]
+    bc, ca, ab = np.cross(b, c), np.cross(c, a), np.cross(a, b)
+    det = np.einsum("ki,ki->k", a, bc)
+    norms = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1)
+    square = (~lp) & (np.abs(det) > 1e-12 * norms)
     rhs0 = -(h + ctx.w0)
     rhs1 = np.broadcast_to(-ctx.d, (K, 3))
     Z0 = np.zeros((K, 3))
     Z1 = np.zeros((K, 3))
-    if square.any():
-        Z = np.linalg.solve(M[square], np.stack([rhs0[square], rhs1[square]], axis=2))
-        Z0[square], Z1[square] = Z[..., 0], Z[..., 1]
+    # Cramer's rule, batched: rows of M^-1 are (b x c, c x a, a x b) / det
+    inv = np.stack([bc[square], ca[square], ab[square]], axis=1) / det[square, None, None]
+    Z0[square] = np.einsum("kij,kj->ki", inv, rhs0[square])
+    Z1[square] = np.einsum("kij,kj->ki", inv, rhs1[square])
     rest = np.flatnonzero((~lp) & (~square))
     if len(rest):
+        # singular: the LP is needed only if equilibrium is solvable for some s, i.e.
+        # rhs0 + s rhs1 lies in range(M) (components e0 + s e1 off the range vanish)
         U_, sv, _ = np.linalg.svd(M[rest])
         rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
-        full = rank == nu[rest]
-        # rank-deficient: the LP is needed only if equilibrium is solvable for some s,
-        # i.e. rhs0 + s rhs1 lies in range(M) (components e0 + s e1 on its complement vanish)
-        perp = np.arange(3)[None, :] >= rank[:, None]  # left singular vectors off the range
+        perp = np.arange(3)[None, :] >= rank[:, None]
         e0 = np.einsum("kai,ka->ki", U_, rhs0[rest]) * perp
         e1 = np.einsum("kai,ka->ki", U_, rhs1[rest]) * perp
         etol = 1e-9 * (1.0 + np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
@@ -282,19 +353,14 @@ def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 
         resid = np.where(
             n1 > 0, np.abs(e0 + s_star[:, None] * e1).max(axis=1), np.abs(e0).max(axis=1)
         )
-        lp[rest[~full & (resid <= etol)]] = True
+        lp[rest[resid <= etol]] = True
+        skip[rest[resid > etol]] = True
         s_ub[rest] = np.where(n1 > 0, s_star, s_max)
-        skip[rest[~full & (resid > etol)]] = True
-        ok = rest[full]
-        if len(ok):
-            Mp = np.linalg.pinv(M[ok], rcond=1e-10)
-            Z0[ok] = np.einsum("kij,kj->ki", Mp, rhs0[ok])
-            Z1[ok] = np.einsum("kij,kj->ki", Mp, rhs1[ok])
     r0 = np.einsum("kij,kj->ki", B, Z0)
     r1 = np.einsum("kij,kj->ki", B, Z1)
     ct0 = np.zeros((K, m))
     ct1 = np.zeros((K, m))
-    for j in range(3):
+    for j in range(nslot):
         col = nmot + j
         sel = (j < nrp) & (col < 3) & ~lp
         ct0[rows[sel], ridx[sel, j]] = Z0[rows[sel], col[sel]]
@@ -309,20 +375,68 @@ def _forces(ctx: _Ctx, S, P, r, ct):
     return np.stack([cn, c_t], axis=-1)
 
 
-def _constraints(ctx: _Ctx, S, P, r, ct, s):
-    """Stack of quantities that must be >= 0 (up to tol) for the state to hold."""
-    c = _forces(ctx, S, P, r, ct)
-    cn, c_t = c[..., 0], c[..., 1]
-    dT = r @ ctx.T.T
-    dN = r @ ctx.N.T - ctx.p
-    slip_ok = np.where(S != 0, S * dT, 0.0)
-    normal_ok = np.where(P, -dN, dN)
-    roll = (S == 0) & P
-    cone1 = np.where(roll, ctx.mu * cn - c_t, 0.0)
-    cone2 = np.where(roll, ctx.mu * cn + c_t, 0.0)
-    w = ctx.w0 + np.asarray(s)[..., None] * ctx.d
-    eq = cn @ ctx.Gn + c_t @ ctx.Gt + w
-    return np.concatenate([slip_ok, normal_ok, cone1, cone2, eq, -eq], axis=-1)
+def _stage_bounds(g0, g1, tol, lo, hi, hx, s_max):
+    """Tighten ``[lo, hi]`` (slack) and ``hx`` (exact upper end) by ``g0 + s g1 >= 0``."""
+    eps = 1e-14 * (1.0 + np.abs(g0))
+    pos = g1 > eps
+    neg = g1 < -eps
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slack = (-tol - g0) / g1
+        exact = -g0 / g1
+    lo = np.maximum(lo, np.max(np.where(pos, slack, 0.0), axis=1, initial=0.0))
+    hi = np.minimum(hi, np.min(np.where(neg, slack, s_max), axis=1, initial=s_max))
+    hx = np.minimum(hx, np.min(np.where(neg, exact, s_max), axis=1, initial=s_max))
+    bad = np.any(~pos & ~neg & (g0 < -tol), axis=1)
+    return lo, np.where(bad, -np.inf, hi), hx
+
+
+def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
+    """For each state, the interval of ``s in [0, s_max]`` where its solution holds.
+
+    Conditions (all closed, tolerance ``tol``), checked in stages on the
+    surviving states only: contact normal state, slip direction, friction
+    cone of rolling contacts, and equilibrium. Returns ``(feasible, s_hi)``
+    with ``s_hi`` the exact largest feasible ``s``.
+    """
+    K = len(S)
+    lo = np.zeros(K)
+    hi = np.full(K, s_max)
+    hx = np.full(K, s_max)
+    hi[~alive] = -np.inf
+    tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1) + np.abs(r1).max(axis=1))
+
+    def live():
+        return np.flatnonzero(lo <= hi)
+
+    def update(idx, g0, g1):
+        lo[idx], hi[idx], hx[idx] = _stage_bounds(
+            g0, g1, tol[idx, None], lo[idx], hi[idx], hx[idx], s_max
+        )
+
+    idx = live()  # normal: persist p - N r >= 0, detach N r - p >= 0
+    sg = np.where(P[idx], -1.0, 1.0)
+    update(idx, sg * (r0[idx] @ ctx.N.T - ctx.p), sg * (r1[idx] @ ctx.N.T))
+    idx = live()  # slip direction: s_i T_i r >= 0
+    Si = S[idx].astype(float)
+    update(idx, Si * (r0[idx] @ ctx.T.T), Si * (r1[idx] @ ctx.T.T))
+    idx = live()  # forces: cone of rolling contacts, then equilibrium
+    Pi, Si = P[idx], S[idx]
+    cn0 = np.where(Pi, ctx.p - r0[idx] @ ctx.N.T, 0.0)
+    cn1 = np.where(Pi, -(r1[idx] @ ctx.N.T), 0.0)
+    ct_0 = np.where(Si == 0, ct0[idx], -ctx.mu * Si * cn0)
+    ct_1 = np.where(Si == 0, ct1[idx], -ctx.mu * Si * cn1)
+    roll = (Si == 0) & Pi
+    for sign in (1.0, -1.0):
+        update(idx, np.where(roll, ctx.mu * cn0 - sign * ct_0, 0.0),
+               np.where(roll, ctx.mu * cn1 - sign * ct_1, 0.0))
+    e0 = cn0 @ ctx.Gn + ct_0 @ ctx.Gt + ctx.w0
+    e1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + ctx.d
+    keep = lo[idx] <= hi[idx]
+    idx, e0, e1 = idx[keep], e0[keep], e1[keep]
+    update(idx, e0, e1)
+    update(idx, -e0, -e1)
+    feas = lo <= hi
+    return feas, np.clip(hx, lo, hi)
 
 
 def _names(S, P) -> NDArray[np.str_]:
@@ -432,10 +546,8 @@ def _existence(grasp, query, p, w, chunk) -> Solution:
     n_states = n_lp = 0
     for S, P in _state_chunks(grasp, p, chunk):
         n_states += len(S)
-        r0, _, ct0, _, lp, skip, _ = _batch(ctx, S, P)
-        g = _constraints(ctx, S, P, r0, ct0, np.zeros(len(S)))
-        tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1, keepdims=True))
-        ok = np.all(g >= -tol, axis=1) & ~lp & ~skip
+        r0, r1, ct0, ct1, lp, skip, _ = _batch(ctx, S, P)
+        ok, _ = _intervals(ctx, S, P, r0, r1, ct0, ct1, 0.0, ~lp & ~skip)
         hit = np.flatnonzero(ok)
         if len(hit):
             k = hit[0]
@@ -465,23 +577,7 @@ def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
     for S, P in _state_chunks(grasp, p, chunk):
         n_states += len(S)
         r0, r1, ct0, ct1, lp, skip, s_ub = _batch(ctx, S, P, cap)
-        K = len(S)
-        g0 = _constraints(ctx, S, P, r0, ct0, np.zeros(K))
-        g1 = _constraints(ctx, S, P, r0 + r1, ct0 + ct1, np.ones(K)) - g0
-        tol = ctx.tol * (
-            1.0 + np.abs(r0).max(axis=1, keepdims=True) + np.abs(r1).max(axis=1, keepdims=True)
-        )
-        # g0 + s g1 >= -tol  ->  bounds on s; the value itself uses the exact bound
-        pos = g1 > 1e-14 * (1.0 + np.abs(g0))
-        neg = g1 < -1e-14 * (1.0 + np.abs(g0))
-        flat = ~pos & ~neg
-        with np.errstate(divide="ignore", invalid="ignore"):
-            slack = (-tol - g0) / g1
-            exact = -g0 / g1
-        lo = np.max(np.where(pos, slack, 0.0), axis=1, initial=0.0)
-        hi = np.min(np.where(neg, slack, cap), axis=1, initial=cap)
-        feas = (lo <= hi) & np.all(~flat | (g0 >= -tol), axis=1) & ~lp & ~skip
-        hi = np.clip(np.min(np.where(neg, exact, cap), axis=1, initial=cap), lo, hi)
+        feas, hi = _intervals(ctx, S, P, r0, r1, ct0, ct1, cap, ~lp & ~skip)
         if feas.any():
             k = np.flatnonzero(feas)[np.argmax(hi[feas])]
             if hi[k] > best[0]:
