@@ -140,6 +140,7 @@ def detachment_states(
     p = _preload(grasp, preload)
     Au, bu, idx, orient = dedupe_planes(N, p)
     faces = np.concatenate(list(affine_faces(Au, bu, np.zeros(len(Au), dtype=bool))))
+    faces = faces[np.all(faces != 0, axis=1)]  # regions only (non-simple vertices give all faces)
     U = (faces[:, idx] * orient <= 0).astype(np.int8)
     return np.unique(U, axis=0)
 
@@ -229,6 +230,18 @@ class _Ctx:
         return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, That, Tperp, w0, d, 1e-9 * scale)
 
 
+def _first_true(mask: NDArray[np.bool_], k: int) -> NDArray[np.intp]:
+    """Column indices of the first ``k`` True entries per row (0 where there are fewer)."""
+    out = np.zeros((len(mask), k), dtype=np.intp)
+    rest = mask.copy()
+    rows = np.arange(len(mask))
+    for j in range(min(k, mask.shape[1])):
+        idx = np.argmax(rest, axis=1)
+        out[:, j] = idx
+        rest[rows, idx] = False
+    return out
+
+
 def _null_bases(ctx: _Ctx, S: NDArray[np.int8]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """Basis ``B`` (K, 3, 3) of ``{r : T_i r = 0 for rolling i}`` in its first ``nmot`` columns.
 
@@ -238,7 +251,7 @@ def _null_bases(ctx: _Ctx, S: NDArray[np.int8]) -> tuple[NDArray[np.float64], ND
     K = len(S)
     roll = S == 0
     nroll = roll.sum(axis=1)
-    ridx = np.argsort(~roll, axis=1, kind="stable")[:, :2]
+    ridx = _first_true(roll, 2)
     B = np.zeros((K, 3, 3))
     nmot = np.zeros(K, dtype=np.intp)
     sel = nroll == 0
@@ -314,8 +327,8 @@ def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 
     nrp = roll_p.sum(axis=1)
     nu = nmot + nrp
     M = -np.einsum("kab,kbj->kaj", Q, B)
-    ridx = np.argsort(~roll_p, axis=1, kind="stable")[:, :3]
-    nslot = ridx.shape[1]
+    nslot = min(3, m)
+    ridx = _first_true(roll_p, nslot)
     rows = np.arange(K)
     for j in range(nslot):
         col = nmot + j
@@ -376,8 +389,13 @@ def _forces(ctx: _Ctx, S, P, r, ct):
 
 
 def _stage_bounds(g0, g1, tol, lo, hi, hx, s_max):
-    """Tighten ``[lo, hi]`` (slack) and ``hx`` (exact upper end) by ``g0 + s g1 >= 0``."""
-    eps = 1e-14 * (1.0 + np.abs(g0))
+    """Tighten ``[lo, hi]`` (with slack ``tol``) and ``hx`` (exact upper end) by
+    ``g0 + s g1 >= 0`` for ``s in [0, s_max]``.
+
+    A slope whose effect over the whole range is below ``tol`` is round-off:
+    the row is then checked as constant, so noise cannot cut intervals.
+    """
+    eps = tol / max(s_max, 1.0)
     pos = g1 > eps
     neg = g1 < -eps
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -403,12 +421,17 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
     hi = np.full(K, s_max)
     hx = np.full(K, s_max)
     hi[~alive] = -np.inf
-    tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1) + np.abs(r1).max(axis=1))
+    tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1) + max(s_max, 1.0) * np.abs(r1).max(axis=1))
 
     def live():
         return np.flatnonzero(lo <= hi)
 
+    fixed = s_max == 0.0 and not np.any(ctx.d)  # Existence: only s = 0 matters
+
     def update(idx, g0, g1):
+        if fixed:
+            hi[idx[np.any(g0 < -tol[idx, None], axis=1)]] = -np.inf
+            return
         lo[idx], hi[idx], hx[idx] = _stage_bounds(
             g0, g1, tol[idx, None], lo[idx], hi[idx], hx[idx], s_max
         )
