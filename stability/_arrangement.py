@@ -129,8 +129,9 @@ def central_faces(A: NDArray[np.float64], tol: float = _TOL) -> NDArray[np.int8]
     verts = verts[np.sort(first)]
     # arcs: consecutive vertices around every circle
     on_v, on_k = np.nonzero(np.abs(verts @ A.T) <= 1e-7)
-    ang = np.arctan2(np.einsum("kd,kd->k", verts[on_v], e2[on_k]),
-                     np.einsum("kd,kd->k", verts[on_v], e1[on_k]))
+    ang = np.arctan2(
+        np.einsum("kd,kd->k", verts[on_v], e2[on_k]), np.einsum("kd,kd->k", verts[on_v], e1[on_k])
+    )
     order = np.lexsort((ang, on_k))
     k_s, a_s = on_k[order], ang[order]
     start = np.flatnonzero(np.r_[True, k_s[1:] != k_s[:-1]])

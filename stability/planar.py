@@ -450,8 +450,11 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
     ct_1 = np.where(Si == 0, ct1[idx], -ctx.mu * Si * cn1)
     roll = (Si == 0) & Pi
     for sign in (1.0, -1.0):
-        update(idx, np.where(roll, ctx.mu * cn0 - sign * ct_0, 0.0),
-               np.where(roll, ctx.mu * cn1 - sign * ct_1, 0.0))
+        update(
+            idx,
+            np.where(roll, ctx.mu * cn0 - sign * ct_0, 0.0),
+            np.where(roll, ctx.mu * cn1 - sign * ct_1, 0.0),
+        )
     e0 = cn0 @ ctx.Gn + ct_0 @ ctx.Gt + ctx.w0
     e1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + ctx.d
     keep = lo[idx] <= hi[idx]

@@ -42,7 +42,11 @@ def test_thesis_table(w, P, stable, c1, c2, c3):
     # motions are not unique: the returned one must satisfy the model
     res = sol.residuals()
     assert set(res) == {
-        "equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation"
+        "equilibrium",
+        "normal_sign",
+        "friction_cone",
+        "spring_law",
+        "max_dissipation",
     }
     assert max(res.values()) <= 1e-9, res
 
