@@ -1,0 +1,158 @@
+"""Resistible-force maps: the largest force a grasp resists, per direction in a plane.
+
+For each direction ``u`` (unit force in the chosen plane, zero torque and
+zero out-of-plane force) the map holds ``max s`` such that the wrench
+``w = s u`` is stable for ``method``: exact per direction for ``planar``
+(MaxDisturbance is an LP per contact state), the L1 grasp wrench space for
+``gws``. This is the thesis' Fig. bin_no_preload / bin_preload / GWS
+(section "Applications to planar grasp stability analysis"), without the
+binary search the thesis used.
+
+Run ``python -m stability.maps`` to draw the thesis' three-panel figure for
+its 3-contact grasp.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .api import solve
+from .errors import GraspError
+from .grasp import Grasp
+from .queries import MaxDisturbance
+
+__all__ = ["ResistibleMap", "resistible_forces", "plot_resistible", "thesis_figure"]
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+@dataclass(frozen=True)
+class ResistibleMap:
+    """Result of :func:`resistible_forces`.
+
+    ``angles`` [rad] measured from the plane's first axis towards its second;
+    ``magnitudes`` [N]: the largest resistible force per direction (0 where
+    even an infinitesimal force is not resisted); ``capped``: True where the
+    search stopped at ``cap`` (resists *at least* ``cap``).
+    """
+
+    angles: NDArray[np.float64]
+    magnitudes: NDArray[np.float64]
+    capped: NDArray[np.bool_]
+    cap: float
+    plane: str
+    method: str
+
+
+def resistible_forces(
+    grasp: Grasp,
+    method: str = "planar",
+    plane: str = "xy",
+    directions: int = 360,
+    preload: float | ArrayLike | None = None,
+    commands: ArrayLike | None = None,
+    cap: float = 10.0,
+    progress: bool = False,
+    **options: Any,
+) -> ResistibleMap:
+    """Sweep ``directions`` force directions in ``plane`` and solve MaxDisturbance for each.
+
+    ``plane`` names two force axes (``"xy"``; spatial grasps also ``"xz"``,
+    ``"yz"``); the remaining force and all torque components are zero.
+    """
+    if len(plane) != 2 or any(a not in _AXES for a in plane) or plane[0] == plane[1]:
+        raise GraspError(f"plane must name two distinct force axes such as 'xy', got {plane!r}")
+    if grasp.planar and plane != "xy":
+        raise GraspError(f"a planar grasp has only the 'xy' force plane, got {plane!r}")
+    if int(directions) < 1:
+        raise GraspError(f"directions must be >= 1, got {directions}")
+    angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
+    i, j = _AXES[plane[0]], _AXES[plane[1]]
+    mags = np.zeros(len(angles))
+    capped = np.zeros(len(angles), dtype=bool)
+    it = angles
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(angles, desc=f"{method} map", unit="dir")
+    for k, a in enumerate(it):
+        d = np.zeros(grasp.wrench_dim)
+        d[i], d[j] = np.cos(a), np.sin(a)
+        q = MaxDisturbance(direction=d, preload=preload, commands=commands, cap=cap)
+        sol = solve(grasp, q, method=method, **options)
+        mags[k] = sol.value if sol.stable and sol.value is not None else 0.0
+        capped[k] = bool(sol.stats.get("capped", False))
+    return ResistibleMap(angles, mags, capped, float(cap), plane, method)
+
+
+def plot_resistible(ax: Any, rmap: ResistibleMap, title: str = "", color: str = "C0") -> None:
+    """Draw a map on a matplotlib polar axis; capped directions are hatched (">= cap")."""
+    th = np.r_[rmap.angles, rmap.angles[:1]]
+    r = np.r_[rmap.magnitudes, rmap.magnitudes[:1]]
+    ax.fill(th, r, color=color, alpha=0.35, lw=0)
+    ax.plot(th, r, color=color, lw=1.5)
+    if rmap.capped.any():
+        cap_r = np.where(np.r_[rmap.capped, rmap.capped[:1]], rmap.cap, np.nan)
+        ax.plot(th, cap_r, color="k", lw=3, label=f">= cap ({rmap.cap:g} N)")
+        ax.legend(loc="lower left", fontsize=7, bbox_to_anchor=(-0.15, -0.15))
+    ax.set_ylim(0, rmap.cap * 1.05)
+    ax.set_title(title, fontsize=9)
+
+
+def thesis_figure(out: str | Path, directions: int = 360, cap: float = 3.0) -> Path:
+    """The thesis' Fig. (a)(b)(c) for its 3-contact grasp: planar P=0, P=1, and the GWS slice."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    g = Grasp(points=[[-1, 0], [0, -1], [1, 0]], normals=[[1, 0], [0, 1], [-1, 0]], mu=0.5)
+    panels = [
+        (
+            resistible_forces(g, "planar", directions=directions, preload=0.0, cap=cap),
+            "planar, no preload",
+            "C0",
+        ),
+        (
+            resistible_forces(g, "planar", directions=directions, preload=1.0, cap=cap),
+            "planar, preload 1 per contact",
+            "C2",
+        ),
+        (
+            resistible_forces(g, "gws", directions=directions, cap=cap),
+            "GWS slice (L1, sum c_n <= 1), tz = 0",
+            "C3",
+        ),
+    ]
+    fig, axes = plt.subplots(1, 3, subplot_kw={"projection": "polar"}, figsize=(12, 4.4))
+    for ax, (rmap, title, color) in zip(axes, panels, strict=True):
+        plot_resistible(ax, rmap, title, color)
+    fig.suptitle(
+        "Resistible forces (fx, fy) [N], contacts (-1,0), (0,-1), (1,0), mu = 0.5"
+        " (thesis ch. 4 figure)",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="bench_out/planar_maps.png", help="PNG path")
+    ap.add_argument("--directions", type=int, default=360)
+    args = ap.parse_args(argv)
+    print(f"wrote {thesis_figure(args.out, args.directions)}")
+
+
+if __name__ == "__main__":
+    main()
