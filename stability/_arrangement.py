@@ -183,7 +183,7 @@ def _vertex_faces(
         inc = np.abs(res) <= scale
         base = signs(res, 0.0)
         base[inc] = 0
-        E = np.linalg.inv(A[t])  # columns e_j: A3 e_j = unit_j
+        E = _inv3(A[t])  # columns e_j: A3 e_j = unit_j
         he = np.einsum("d,kdj->kj", _H, E)
         en = np.linalg.norm(E, axis=1)
         simple = (inc.sum(axis=1) == 3) & np.all(np.abs(he) > 1e-9 * en, axis=1)
@@ -223,6 +223,14 @@ def _vertex_faces(
             f = np.repeat(base[kk][None, :], len(local), axis=0)
             f[:, Z] = local
             yield f
+
+
+def _inv3(M: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched inverse of 3 x 3 matrices by cofactors (rows are planes, nonsingular)."""
+    a, b, c = M[:, 0], M[:, 1], M[:, 2]
+    bc, ca, ab = np.cross(b, c), np.cross(c, a), np.cross(a, b)
+    det = np.einsum("ki,ki->k", a, bc)
+    return np.stack([bc, ca, ab], axis=2) / det[:, None, None]
 
 
 # outward normals of a regular tetrahedron: the bounding simplex

@@ -155,7 +155,9 @@ class Grasp:
                     f"{self._J.shape[1]} joints, got {Rm.shape}"
                 )
             self._R = Rm
-        for arr in (self._points, self._normals, self._tangents, self._mu):
+        for arr in (self._points, self._normals, self._tangents, self._mu, self._J, self._R):
+            if arr is None:
+                continue
             arr.setflags(write=False)
         self._G = self._build_G()
         self._G.setflags(write=False)

@@ -46,7 +46,7 @@ from scipy.spatial import ConvexHull, QhullError
 from .api import register
 from .errors import GraspError, SolverError
 from .grasp import Grasp
-from .queries import Existence, MaxDisturbance, Query
+from .queries import Existence, MaxDisturbance, Query, checked_direction_cap
 from .solution import Solution
 
 __all__ = ["primitive_wrenches", "ferrari_canny", "force_closure", "solve_gws", "cone_edges"]
@@ -241,7 +241,7 @@ def _forces(grasp: Grasp, E: NDArray[np.float64], lam: NDArray[np.float64]) -> N
         "friction cones; ignores preload, compliance and maximum dissipation"
     ),
 )
-def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **_: object) -> Solution:
+def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **options: object) -> Solution:
     """Answer ``query`` with the grasp wrench space model (one LP, HiGHS).
 
     Existence(wrench=w): stable iff ``lam >= 0`` exists with ``G E lam + w = 0``
@@ -270,6 +270,8 @@ def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **_: object) -> Soluti
     SolverError
         HiGHS ends with a status other than optimal or infeasible.
     """
+    if options:
+        raise GraspError(f"unknown option(s) for method 'gws': {sorted(options)}")
     edges = _check_edges(edges)
     if not isinstance(query, Existence | MaxDisturbance):
         raise GraspError(f"gws answers Existence and MaxDisturbance, got {type(query).__name__}")
@@ -298,15 +300,7 @@ def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **_: object) -> Soluti
             return Solution(False, "gws", grasp, query, forces=None, stats=stats)
         return Solution(True, "gws", grasp, query, forces=_forces(grasp, E, lam), stats=stats)
 
-    d = grasp.wrench(query.direction, "direction")
-    if not np.any(d != 0.0):
-        raise GraspError("direction must be nonzero")
-    try:
-        cap = float(query.cap)
-    except (TypeError, ValueError) as exc:
-        raise GraspError(f"cap must be a number, got {query.cap!r}") from exc
-    if not (np.isfinite(cap) and cap >= 0):
-        raise GraspError(f"cap must be finite and >= 0, got {query.cap!r}")
+    d, cap = checked_direction_cap(grasp, query)
     # variables x = (lam (K), s); rows: G E lam + s d = 0, sum lam <= 1
     A = np.zeros((wd + 1, K + 1))
     A[:wd, :K] = GE

@@ -43,7 +43,7 @@ from ._lp import INF, solve_lp
 from .api import register
 from .errors import GraspError, MethodError
 from .grasp import Grasp, cross2
-from .queries import Existence, MaxDisturbance
+from .queries import Existence, MaxDisturbance, checked_direction_cap
 from .solution import Solution
 
 __all__ = [
@@ -307,15 +307,33 @@ def _complete(M: NDArray[np.float64], nu: NDArray[np.intp]) -> None:
     M[nu == 0] = np.eye(3)
 
 
-def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 0.0):
-    """Affine-in-s candidate solutions of each state's square system.
+@dataclass
+class _Prep:
+    """Wrench-independent part of a chunk of states: systems factorised once."""
 
-    Returns ``(r0, r1, ct0, ct1, lp, skip)`` where ``r(s) = r0 + s r1`` and the
-    rolling friction ``ct(s) = ct0 + s ct1`` ((K, m), zero elsewhere); ``lp``
-    masks states needing the LP (singular with solvable equilibrium for some
-    ``s`` in ``[0, s_max]``, or more than 3 unknowns), ``skip`` the singular
-    states whose equilibrium has no solution at all, and ``s_ub`` an upper
-    bound on the stable ``s`` of each LP state.
+    S: NDArray[np.int8]
+    P: NDArray[np.bool_]
+    B: NDArray[np.float64]  # (K, 3, 3) motion basis, first nmot columns
+    nmot: NDArray[np.intp]
+    nrp: NDArray[np.intp]  # rolling, persisting contacts (free friction unknowns)
+    ridx: NDArray[np.intp]  # their indices (first 3)
+    h: NDArray[np.float64]  # (K, 3) wrench of the preload forces
+    many: NDArray[np.bool_]  # more than 3 unknowns: LP
+    square: NDArray[np.bool_]  # nonsingular 3 x 3 system
+    inv: NDArray[np.float64]  # (K_square, 3, 3) its inverse
+    rest: NDArray[np.intp]  # singular systems
+    U_perp: NDArray[np.float64]  # (K_rest, 3, 3) left singular vectors, masked off the range
+
+    def __len__(self) -> int:
+        return len(self.S)
+
+
+def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
+    """Build and factorise each state's system ``M z = -h - w0 - s d`` (eq. linear_system).
+
+    Unknowns ``z``: motion coordinates in the slip face (``r = B z``) and the
+    friction of rolling, persisting contacts; equations: equilibrium
+    ``sum_persist (Gn_i - mu_i s_i Gt_i)(p_i - N_i r) + sum_roll Gt_i c_t,i + w = 0``.
     """
     K, m = S.shape
     Pf = P.astype(float)
@@ -326,40 +344,58 @@ def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 
     roll_p = (S == 0) & P
     nrp = roll_p.sum(axis=1)
     nu = nmot + nrp
-    M = -np.einsum("kab,kbj->kaj", Q, B)
-    nslot = min(3, m)
-    ridx = _first_true(roll_p, nslot)
+    M = -(Q @ B)
+    ridx = _first_true(roll_p, min(3, m))
     rows = np.arange(K)
-    for j in range(nslot):
+    for j in range(ridx.shape[1]):
         col = nmot + j
         sel = (j < nrp) & (col < 3)
         M[rows[sel], :, col[sel]] = ctx.Gt[ridx[sel, j]]
-    lp = nu > 3
-    skip = np.zeros(K, dtype=bool)
-    s_ub = np.full(K, s_max)  # upper bound on s for LP states
+    many = nu > 3
     _complete(M, nu)
     a, b, c = M[:, :, 0], M[:, :, 1], M[:, :, 2]
     bc, ca, ab = np.cross(b, c), np.cross(c, a), np.cross(a, b)
     det = np.einsum("ki,ki->k", a, bc)
     norms = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1)
-    square = (~lp) & (np.abs(det) > 1e-12 * norms)
-    rhs0 = -(h + ctx.w0)
+    square = (~many) & (np.abs(det) > 1e-12 * norms)
+    # Cramer's rule, batched: rows of M^-1 are (b x c, c x a, a x b) / det
+    inv = np.stack([bc[square], ca[square], ab[square]], axis=1) / det[square, None, None]
+    rest = np.flatnonzero((~many) & (~square))
+    U_perp = np.zeros((len(rest), 3, 3))
+    if len(rest):
+        U_, sv, _ = np.linalg.svd(M[rest])
+        rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
+        U_perp = U_ * (np.arange(3)[None, None, :] >= rank[:, None, None])
+    return _Prep(S, P, B, nmot, nrp, ridx, h, many, square, inv, rest, U_perp)
+
+
+def _batch(ctx: _Ctx, pr: _Prep, s_max: float = 0.0):
+    """Affine-in-s candidate solutions of each state's system.
+
+    Returns ``(r0, r1, ct0, ct1, lp, skip, s_ub)`` where ``r(s) = r0 + s r1``
+    and the rolling friction ``ct(s) = ct0 + s ct1`` ((K, m), zero elsewhere);
+    ``lp`` masks states needing the LP (singular with solvable equilibrium
+    for some ``s`` in ``[0, s_max]``, or more than 3 unknowns), ``skip`` the
+    singular states whose equilibrium has no solution at all, and ``s_ub`` an
+    upper bound on the stable ``s`` of each LP state.
+    """
+    K, m = pr.S.shape
+    lp = pr.many.copy()
+    skip = np.zeros(K, dtype=bool)
+    s_ub = np.full(K, s_max)
+    rhs0 = -(pr.h + ctx.w0)
     rhs1 = np.broadcast_to(-ctx.d, (K, 3))
     Z0 = np.zeros((K, 3))
     Z1 = np.zeros((K, 3))
-    # Cramer's rule, batched: rows of M^-1 are (b x c, c x a, a x b) / det
-    inv = np.stack([bc[square], ca[square], ab[square]], axis=1) / det[square, None, None]
-    Z0[square] = np.einsum("kij,kj->ki", inv, rhs0[square])
-    Z1[square] = np.einsum("kij,kj->ki", inv, rhs1[square])
-    rest = np.flatnonzero((~lp) & (~square))
+    sq = pr.square
+    Z = pr.inv @ np.stack([rhs0[sq], rhs1[sq]], axis=2)
+    Z0[sq], Z1[sq] = Z[..., 0], Z[..., 1]
+    rest = pr.rest
     if len(rest):
         # singular: the LP is needed only if equilibrium is solvable for some s, i.e.
         # rhs0 + s rhs1 lies in range(M) (components e0 + s e1 off the range vanish)
-        U_, sv, _ = np.linalg.svd(M[rest])
-        rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
-        perp = np.arange(3)[None, :] >= rank[:, None]
-        e0 = np.einsum("kai,ka->ki", U_, rhs0[rest]) * perp
-        e1 = np.einsum("kai,ka->ki", U_, rhs1[rest]) * perp
+        e0 = np.einsum("kai,ka->ki", pr.U_perp, rhs0[rest])
+        e1 = np.einsum("kai,ka->ki", pr.U_perp, rhs1[rest])
         etol = 1e-9 * (1.0 + np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
         n1 = (e1**2).sum(axis=1)
         s_star = np.clip(-(e0 * e1).sum(axis=1) / np.maximum(n1, 1e-300), 0.0, s_max)
@@ -369,16 +405,46 @@ def _batch(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_], s_max: float = 
         lp[rest[resid <= etol]] = True
         skip[rest[resid > etol]] = True
         s_ub[rest] = np.where(n1 > 0, s_star, s_max)
-    r0 = np.einsum("kij,kj->ki", B, Z0)
-    r1 = np.einsum("kij,kj->ki", B, Z1)
+    r0 = (pr.B @ Z0[:, :, None])[..., 0]
+    r1 = (pr.B @ Z1[:, :, None])[..., 0]
     ct0 = np.zeros((K, m))
     ct1 = np.zeros((K, m))
-    for j in range(nslot):
-        col = nmot + j
-        sel = (j < nrp) & (col < 3) & ~lp
-        ct0[rows[sel], ridx[sel, j]] = Z0[rows[sel], col[sel]]
-        ct1[rows[sel], ridx[sel, j]] = Z1[rows[sel], col[sel]]
+    rows = np.arange(K)
+    for j in range(pr.ridx.shape[1]):
+        col = pr.nmot + j
+        sel = (j < pr.nrp) & (col < 3) & ~lp
+        ct0[rows[sel], pr.ridx[sel, j]] = Z0[rows[sel], col[sel]]
+        ct1[rows[sel], pr.ridx[sel, j]] = Z1[rows[sel], col[sel]]
     return r0, r1, ct0, ct1, lp, skip, s_ub
+
+
+_CACHE_STATES = 200_000  # cache the factorised states of grasps up to this size
+_CACHE_PRELOADS = 4
+
+
+def _prepared(grasp: Grasp, ctx: _Ctx, p: NDArray[np.float64], chunk: int) -> Iterator[_Prep]:
+    """Factorised state chunks of ``(grasp, preload)``, cached on the grasp when small.
+
+    The enumeration and the factorisations do not depend on the wrench, so
+    repeated queries on one grasp (maps, sweeps) reuse them.
+    """
+    cache: dict[bytes, list[_Prep]] = grasp.__dict__.setdefault("_planar_cache", {})
+    key = p.tobytes()
+    if key in cache:
+        yield from cache[key]
+        return
+    done: list[_Prep] = []
+    total = 0
+    for S, P in _state_chunks(grasp, p, chunk):
+        pr = _prepare(ctx, S, P)
+        total += len(pr)
+        if total <= _CACHE_STATES:
+            done.append(pr)
+        yield pr
+    if total <= _CACHE_STATES:  # reached only when the enumeration ran to the end
+        while len(cache) >= _CACHE_PRELOADS:
+            cache.pop(next(iter(cache)))
+        cache[key] = done
 
 
 def _forces(ctx: _Ctx, S, P, r, ct):
@@ -554,25 +620,23 @@ def _solve_planar(
 ) -> Solution:
     if options:
         raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
+    if not isinstance(chunk, int | np.integer) or chunk < 1:
+        raise GraspError(f"option chunk must be a positive integer, got {chunk!r}")
     p = _preload(grasp, query.preload)
     if isinstance(query, Existence):
         w = grasp.wrench(query.wrench)
         return _existence(grasp, query, p, w, chunk)
-    d = grasp.wrench(query.direction, "direction")
-    if not np.any(d):
-        raise GraspError("MaxDisturbance direction must be non-zero")
-    cap = float(query.cap)
-    if not np.isfinite(cap) or cap <= 0:
-        raise GraspError(f"MaxDisturbance cap must be finite and > 0, got {query.cap}")
+    d, cap = checked_direction_cap(grasp, query)
     return _max_disturbance(grasp, query, p, d, cap, chunk)
 
 
 def _existence(grasp, query, p, w, chunk) -> Solution:
     ctx = _Ctx.make(grasp, p, w, np.zeros(3))
     n_states = n_lp = 0
-    for S, P in _state_chunks(grasp, p, chunk):
+    for pr in _prepared(grasp, ctx, p, chunk):
+        S, P = pr.S, pr.P
         n_states += len(S)
-        r0, r1, ct0, ct1, lp, skip, _ = _batch(ctx, S, P)
+        r0, r1, ct0, ct1, lp, skip, _ = _batch(ctx, pr)
         ok, _ = _intervals(ctx, S, P, r0, r1, ct0, ct1, 0.0, ~lp & ~skip)
         hit = np.flatnonzero(ok)
         if len(hit):
@@ -600,9 +664,10 @@ def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
     pending: list[tuple[float, NDArray[np.int8], NDArray[np.bool_]]] = []
     best: tuple[float, Any] = (-1.0, None)
     n_states = n_lp = 0
-    for S, P in _state_chunks(grasp, p, chunk):
+    for pr in _prepared(grasp, ctx, p, chunk):
+        S, P = pr.S, pr.P
         n_states += len(S)
-        r0, r1, ct0, ct1, lp, skip, s_ub = _batch(ctx, S, P, cap)
+        r0, r1, ct0, ct1, lp, skip, s_ub = _batch(ctx, pr, cap)
         feas, hi = _intervals(ctx, S, P, r0, r1, ct0, ct1, cap, ~lp & ~skip)
         if feas.any():
             k = np.flatnonzero(feas)[np.argmax(hi[feas])]

@@ -11,9 +11,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numpy.typing import ArrayLike
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Existence", "MaxDisturbance", "OptimalCommands", "Query"]
+from .errors import GraspError
+
+__all__ = ["Existence", "MaxDisturbance", "OptimalCommands", "Query", "checked_direction_cap"]
 
 
 @dataclass(frozen=True)
@@ -59,3 +62,18 @@ class OptimalCommands:
 
 
 Query = Existence | MaxDisturbance | OptimalCommands
+
+
+def checked_direction_cap(grasp, query: MaxDisturbance) -> tuple[NDArray[np.float64], float]:
+    """Validated ``(direction, cap)`` of a MaxDisturbance query: non-zero finite direction of
+    the grasp's wrench size, finite ``cap > 0``; :class:`GraspError` otherwise."""
+    d = grasp.wrench(query.direction, "direction")
+    if not np.any(d != 0.0):
+        raise GraspError("MaxDisturbance direction must be non-zero")
+    try:
+        cap = float(query.cap)
+    except (TypeError, ValueError) as exc:
+        raise GraspError(f"MaxDisturbance cap must be a number, got {query.cap!r}") from exc
+    if not (np.isfinite(cap) and cap > 0):
+        raise GraspError(f"MaxDisturbance cap must be finite and > 0, got {query.cap!r}")
+    return d, cap
