@@ -290,14 +290,12 @@ def affine_faces(
         f = np.repeat(base[None, :], len(local), axis=0)
         f[:, Z0] = local
         yield f
-    only_neg = np.zeros(Pe, dtype=bool)
-    yield from (f[:, :P] for f in _vertex_faces(A, b, may_zero, only_neg, tri, V, chunk))
     # bounding simplex around every vertex: faces unbounded below get a lowest vertex on it
     R = 1.0 + 2.0 * (float(np.abs(V @ _SIMPLEX.T).max()) if len(V) else 0.0)
     Ab = np.concatenate([A, _SIMPLEX])
     bb = np.concatenate([b, np.full(4, R)])
     mz = np.concatenate([may_zero, np.zeros(4, dtype=bool)])
-    on = np.concatenate([only_neg, np.ones(4, dtype=bool)])
+    on = np.concatenate([np.zeros(Pe, dtype=bool), np.ones(4, dtype=bool)])
     btri = _triples(Pe + 4)
     btri = btri[btri[:, 2] >= Pe]  # at least one simplex plane (sorted triples)
     A3 = Ab[btri]
@@ -305,5 +303,6 @@ def affine_faces(
     btri = btri[ok]
     BV = np.linalg.solve(A3[ok], bb[btri][..., None])[..., 0]
     inside = np.all(BV @ _SIMPLEX.T - R <= _TOL * (1.0 + R), axis=1)
-    BV, btri = BV[inside], btri[inside]
-    yield from (f[:, :P] for f in _vertex_faces(Ab, bb, mz, on, btri, BV, chunk))
+    allV = np.concatenate([V, BV[inside]])
+    allT = np.concatenate([tri, btri[inside]])
+    yield from (f[:, :P] for f in _vertex_faces(Ab, bb, mz, on, allT, allV, chunk))

@@ -363,9 +363,20 @@ def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
     rest = np.flatnonzero((~many) & (~square))
     U_perp = np.zeros((len(rest), 3, 3))
     if len(rest):
-        U_, sv, _ = np.linalg.svd(M[rest])
-        rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
-        U_perp = U_ * (np.arange(3)[None, None, :] >= rank[:, None, None])
+        # rank 2 (the usual singular case): the normal of the column plane is the
+        # largest of the three column cross products; lower ranks use an SVD
+        cr = np.stack([bc[rest], ca[rest], ab[rest]], axis=1)
+        cn = np.linalg.norm(cr, axis=2)
+        k = np.argmax(cn, axis=1)
+        big = cn[np.arange(len(rest)), k]
+        rank2 = big > 1e-10 * np.maximum(norms[rest], 1e-300) ** (2 / 3)
+        r2 = np.flatnonzero(rank2)
+        U_perp[r2, :, 2] = cr[r2, k[r2]] / big[r2, None]
+        low = np.flatnonzero(~rank2)
+        if len(low):
+            U_, sv, _ = np.linalg.svd(M[rest[low]])
+            rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
+            U_perp[low] = U_ * (np.arange(3)[None, None, :] >= rank[:, None, None])
     return _Prep(S, P, B, nmot, nrp, ridx, h, many, square, inv, rest, U_perp)
 
 
