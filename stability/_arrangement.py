@@ -289,7 +289,7 @@ def affine_faces(
         local = central_faces(A[Z0])
         f = np.repeat(base[None, :], len(local), axis=0)
         f[:, Z0] = local
-        yield f
+        yield f[:, :P]
     # bounding simplex around every vertex: faces unbounded below get a lowest vertex on it
     R = 1.0 + 2.0 * (float(np.abs(V @ _SIMPLEX.T).max()) if len(V) else 0.0)
     Ab = np.concatenate([A, _SIMPLEX])
