@@ -242,7 +242,7 @@ def affine_faces(
     A: NDArray[np.float64],
     b: NDArray[np.float64],
     may_zero: NDArray[np.bool_],
-    chunk: int = 16384,
+    chunk: int = 8192,
 ) -> Iterator[NDArray[np.int8]]:
     """Candidate faces of the affine arrangement ``{A_k r = b_k}`` in R^3, in chunks.
 

@@ -157,7 +157,7 @@ def _planes(grasp: Grasp, p: NDArray[np.float64]):
 
 
 def _state_chunks(
-    grasp: Grasp, p: NDArray[np.float64], chunk: int = 16384
+    grasp: Grasp, p: NDArray[np.float64], chunk: int = 8192
 ) -> Iterator[tuple[NDArray[np.int8], NDArray[np.bool_]]]:
     """Candidate (slip state S, persist mask P) chunks co-occurring for some motion.
 
@@ -233,12 +233,13 @@ class _Ctx:
 def _first_true(mask: NDArray[np.bool_], k: int) -> NDArray[np.intp]:
     """Column indices of the first ``k`` True entries per row (0 where there are fewer)."""
     out = np.zeros((len(mask), k), dtype=np.intp)
-    rest = mask.copy()
-    rows = np.arange(len(mask))
+    rows = np.flatnonzero(mask.any(axis=1))
+    rest = mask[rows]
+    sub = np.arange(len(rows))
     for j in range(min(k, mask.shape[1])):
         idx = np.argmax(rest, axis=1)
-        out[:, j] = idx
-        rest[rows, idx] = False
+        out[rows, j] = idx
+        rest[sub, idx] = False
     return out
 
 
@@ -513,9 +514,15 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
             g0, g1, tol[idx, None], lo[idx], hi[idx], hx[idx], s_max
         )
 
-    idx = live()  # normal: persist p - N r >= 0, detach N r - p >= 0
-    sg = np.where(P[idx], -1.0, 1.0)
-    update(idx, sg * (r0[idx] @ ctx.N.T - ctx.p), sg * (r1[idx] @ ctx.N.T))
+    if fixed:  # normal: persist N r - p <= tol, detach N r - p >= -tol
+        dN = r0 @ ctx.N.T
+        dN -= ctx.p
+        t = tol[:, None]
+        hi[np.any(np.where(P, dN > t, dN < -t), axis=1)] = -np.inf
+    else:
+        idx = live()  # normal: persist p - N r >= 0, detach N r - p >= 0
+        sg = np.where(P[idx], -1.0, 1.0)
+        update(idx, sg * (r0[idx] @ ctx.N.T - ctx.p), sg * (r1[idx] @ ctx.N.T))
     idx = live()  # slip direction: s_i T_i r >= 0
     Si = S[idx].astype(float)
     update(idx, Si * (r0[idx] @ ctx.T.T), Si * (r1[idx] @ ctx.T.T))
@@ -627,7 +634,7 @@ def _solution(grasp, query, ctx, S, P, r, ct, s, stable, value, stats) -> Soluti
     summary="thesis ch. 4: exact, polynomial-time enumeration of co-occurring states",
 )
 def _solve_planar(
-    grasp: Grasp, query: Existence | MaxDisturbance, chunk: int = 16384, **options: Any
+    grasp: Grasp, query: Existence | MaxDisturbance, chunk: int = 8192, **options: Any
 ) -> Solution:
     if options:
         raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
