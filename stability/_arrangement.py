@@ -125,7 +125,8 @@ def central_faces(A: NDArray[np.float64], tol: float = _TOL) -> NDArray[np.int8]
     X = X / nrm[:, None]
     verts = np.concatenate([X, -X])
     q = np.round(verts / 1e-7).astype(np.int64)  # merge vertices shared by 3+ circles
-    _, first = np.unique(q, axis=0, return_index=True)
+    qv = np.ascontiguousarray(q).view(np.dtype((np.void, 24))).ravel()
+    _, first = np.unique(qv, return_index=True)
     verts = verts[np.sort(first)]
     # arcs: consecutive vertices around every circle
     on_v, on_k = np.nonzero(np.abs(verts @ A.T) <= 1e-7)

@@ -370,14 +370,27 @@ def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
         cn = np.linalg.norm(cr, axis=2)
         k = np.argmax(cn, axis=1)
         big = cn[np.arange(len(rest)), k]
-        rank2 = big > 1e-10 * np.maximum(norms[rest], 1e-300) ** (2 / 3)
+        ln = np.linalg.norm(M[rest], axis=1)  # column norms
+        pair = np.max(ln * np.roll(ln, 1, axis=1), axis=1)  # largest product of two
+        rank2 = big > 1e-10 * pair
         r2 = np.flatnonzero(rank2)
         U_perp[r2, :, 2] = cr[r2, k[r2]] / big[r2, None]
+        # rank 1 or 0: the complement of the largest column, or everything
         low = np.flatnonzero(~rank2)
         if len(low):
-            U_, sv, _ = np.linalg.svd(M[rest[low]])
-            rank = (sv > 1e-10 * np.maximum(sv[:, :1], 1e-300)).sum(axis=1)
-            U_perp[low] = U_ * (np.arange(3)[None, None, :] >= rank[:, None, None])
+            Ml = M[rest[low]]
+            coln = np.linalg.norm(Ml, axis=1)
+            j = np.argmax(coln, axis=1)
+            big = coln[np.arange(len(low)), j]
+            one = big > 1e-12
+            col = Ml[np.arange(len(low)), :, j] / np.maximum(big, 1e-300)[:, None]
+            e = np.eye(3)[np.argmin(np.abs(col), axis=1)]
+            u = np.cross(col, e)
+            u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+            v = np.cross(col, u)
+            U_perp[low[one], :, 1] = u[one]
+            U_perp[low[one], :, 2] = v[one]
+            U_perp[low[~one]] = np.eye(3)
     return _Prep(S, P, B, nmot, nrp, ridx, h, many, square, inv, rest, U_perp)
 
 
