@@ -9,6 +9,10 @@ numbers, and extends it to m = 20 and 50. For each m it reports medians over
 * ``joint``: co-occurring (slip, detachment) states with preload 1 (what the
   solver visits when it has to prove instability);
 * ``enum_s``: time to enumerate the slip states (the thesis' timed quantity);
+* ``thesis_alg_here_s``: the thesis' own enumeration (one LP per step, dual
+  polyhedron, minimum cycle basis; :func:`planar.slip_states_thesis`) timed
+  on the same machine in the same run (median of 3, m <= 9), the reference
+  for the speed-up;
 * ``query_s``: time to answer one ``Existence`` query for a random wrench
   ``w ~ N(0, I)`` with preload 1 (``stable_frac``: share of stable answers);
 * ``worst_s``: time for an unstable query that needs the full enumeration
@@ -88,6 +92,14 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
                 faces = pl.count_slip_faces(g)["total"]
                 states = len(S)
                 joint = sol.stats["states"]
+        # the thesis' own algorithm (LP per step + minimum cycle basis), same machine
+        lp_enum = None
+        if m <= 9:
+            lp_t = []
+            for _ in range(3):
+                g = random_grasp(rng, m)
+                lp_t.append(_timed(lambda g=g: pl.slip_states_thesis(g))[0])
+            lp_enum = float(np.median(lp_t))
         th = THESIS.get(m, (None, None))
         rows.append(
             {
@@ -98,6 +110,7 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
                 "joint_states": joint,
                 "thesis_time_s": th[1],
                 "enum_s": float(np.median(enum)),
+                "thesis_alg_here_s": lp_enum,
                 "query_s": float(np.median(query)),
                 "stable_frac": float(np.mean(stable)),
                 "worst_s": float(np.median(worst)),
@@ -129,6 +142,14 @@ def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
         "ks--",
         label="thesis: enumerate slip states (LP per step)",
     )
+    hm = [r["m"] for r in rows if r["thesis_alg_here_s"]]
+    ax.semilogy(
+        hm,
+        [r["thesis_alg_here_s"] for r in rows if r["thesis_alg_here_s"]],
+        "ks:",
+        mfc="none",
+        label="thesis' algorithm re-implemented, this machine",
+    )
     ax.semilogy(m, [r["enum_s"] for r in rows], "o-", label="ours: enumerate slip states")
     ax.semilogy(m, [r["query_s"] for r in rows], "^-", label="ours: Existence, random wrench")
     ax.semilogy(
@@ -154,16 +175,20 @@ def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
 
 def print_table(rows: list[dict]) -> None:
     hdr = (
-        f"{'m':>3} {'#S thesis':>9} {'#S ours':>7} {'joint':>7} {'thesis s':>9} "
-        f"{'enum ms':>8} {'query ms':>9} {'stable':>6} {'worst ms':>9} {'warm ms':>8}"
+        f"{'m':>3} {'#S thesis':>9} {'#S ours':>7} {'joint':>7} {'thesis s':>9} {'alg here s':>10} "
+        f"{'enum ms':>8} {'speedup':>8} {'query ms':>9} {'stable':>6} {'worst ms':>9} "
+        f"{'warm ms':>8}"
     )
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         ts = f"{r['thesis_time_s']:.3g}" if r["thesis_time_s"] else "-"
+        here = r["thesis_alg_here_s"]
+        hs = f"{here:.3g}" if here else "-"
+        sp = f"{here / r['enum_s']:.0f}x" if here else "-"
         print(
             f"{r['m']:>3} {r['thesis_states'] or '-':>9} {r['faces']:>7} {r['joint_states']:>7} "
-            f"{ts:>9} {r['enum_s'] * 1e3:>8.2f} {r['query_s'] * 1e3:>9.2f} "
+            f"{ts:>9} {hs:>10} {r['enum_s'] * 1e3:>8.2f} {sp:>8} {r['query_s'] * 1e3:>9.2f} "
             f"{r['stable_frac']:>6.2f} {r['worst_s'] * 1e3:>9.1f} {r['worst_warm_s'] * 1e3:>8.1f}"
         )
 

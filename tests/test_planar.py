@@ -104,6 +104,15 @@ def test_slip_state_count_matches_thesis(m):
     assert len(S) == expected
 
 
+@pytest.mark.parametrize("m", range(2, 8))
+def test_slip_states_match_thesis_algorithm(m):
+    """Sphere enumeration == the thesis' LP + dual polyhedron + minimum cycle basis."""
+    g = random_grasp(np.random.default_rng(100 + m), m)
+    ours = {s.tobytes() for s in pl.slip_states(g)}
+    thesis = {s.tobytes() for s in pl.slip_states_thesis(g)}
+    assert ours == thesis
+
+
 def test_slip_states_cover_sampled_motions():
     """Every sign pattern of T r for random motions r is one of the enumerated states."""
     rng = np.random.default_rng(3)
