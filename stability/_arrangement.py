@@ -71,16 +71,11 @@ def dedupe_planes(
     a = a * orient[:, None]
     beta = beta * orient
     key = np.concatenate([a, beta[:, None]], axis=1)
-    n = len(a)
-    index = np.full(n, -1, dtype=np.intp)
-    reps: list[int] = []
-    for k in range(n):
-        if index[k] >= 0:
-            continue
-        same = np.max(np.abs(key - key[k]), axis=1) <= tol * (1.0 + np.abs(beta[k]))
-        same &= index < 0
-        index[same] = len(reps)
-        reps.append(k)
+    same = np.max(np.abs(key[:, None, :] - key[None, :, :]), axis=2) <= tol * (
+        1.0 + np.abs(beta)[:, None]
+    )
+    first = np.argmax(same, axis=1)  # lowest-index plane equal to each plane
+    reps, index = np.unique(first, return_inverse=True)
     return a[reps], beta[reps], index, orient
 
 
