@@ -117,7 +117,7 @@ def central_faces(A: NDArray[np.float64], tol: float = _TOL) -> NDArray[np.int8]
     i, j = np.triu_indices(n, 1)
     X = np.cross(A[i], A[j])
     nrm = np.linalg.norm(X, axis=1)
-    X = X / nrm[:, None]
+    X = X[nrm > tol] / nrm[nrm > tol, None]  # parallel rows (not expected here) meet nowhere
     verts = np.concatenate([X, -X])
     q = np.round(verts / 1e-7).astype(np.int64)  # merge vertices shared by 3+ circles
     qv = np.ascontiguousarray(q).view(np.dtype((np.void, 24))).ravel()
@@ -265,20 +265,14 @@ def affine_faces(
     through0 = np.abs(b) <= _TOL
     # origin: handled as one (usually non-simple) vertex when it is a vertex at all
     Z0 = np.flatnonzero(through0)
-    V_list, T_list = [], []
+    # vertices: every independent triple (triples of planes through the origin give the
+    # origin, handled below); |det| of unit normals down to 1e-13 still gives a vertex
     tri = _triples(Pe)
-    if len(tri):
-        keep = ~np.all(through0[tri], axis=1)
-        tri = tri[keep]
-        A3 = A[tri]
-        det = np.linalg.det(A3)
-        ok = np.abs(det) > 1e-10
-        tri = tri[ok]
-        V = np.linalg.solve(A3[ok], b[tri][..., None])[..., 0] if ok.any() else np.zeros((0, 3))
-        V_list.append(V)
-        T_list.append(tri)
-    V = np.concatenate(V_list) if V_list else np.zeros((0, 3))
-    tri = np.concatenate(T_list) if T_list else np.zeros((0, 3), dtype=np.intp)
+    tri = tri[~np.all(through0[tri], axis=1)] if len(tri) else tri
+    A3 = A[tri]
+    ok = np.abs(np.linalg.det(A3)) > 1e-13 if len(tri) else np.zeros(0, dtype=bool)
+    tri = tri[ok]
+    V = np.linalg.solve(A3[ok], b[tri][..., None])[..., 0] if len(tri) else np.zeros((0, 3))
     origin_is_vertex = len(Z0) >= 3 and np.linalg.matrix_rank(A[Z0], tol=1e-9) == 3
     if origin_is_vertex:
         base = signs(-b)
@@ -295,7 +289,7 @@ def affine_faces(
     btri = _triples(Pe + 4)
     btri = btri[btri[:, 2] >= Pe]  # at least one simplex plane (sorted triples)
     A3 = Ab[btri]
-    ok = np.abs(np.linalg.det(A3)) > 1e-10
+    ok = np.abs(np.linalg.det(A3)) > 1e-13
     btri = btri[ok]
     BV = np.linalg.solve(A3[ok], bb[btri][..., None])[..., 0]
     inside = np.all(BV @ _SIMPLEX.T - R <= _TOL * (1.0 + R), axis=1)

@@ -56,6 +56,7 @@ __all__ = [
 ]
 
 STATE_NAMES = {(1, 0): "roll", (1, 1): "slip+", (1, -1): "slip-"}
+_EPS = 1e-9  # relative tolerance of the state checks (geometry normalised to size 1)
 
 
 def motion_planes(grasp: Grasp) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -216,7 +217,7 @@ class _Ctx:
     Tperp: NDArray[np.float64]  # (m, 3, 2) orthonormal basis of {r: T_i r = 0}
     w0: NDArray[np.float64]  # wrench at s = 0
     d: NDArray[np.float64]  # wrench per unit s
-    tol: float
+    tol: float  # slack at s = 0 without motion: eps (|w0| + max p)
 
     @classmethod
     def make(cls, grasp: Grasp, p, w0, d) -> _Ctx:
@@ -225,10 +226,11 @@ class _Ctx:
         Gn, Gt = G[:, 0::2].T.copy(), G[:, 1::2].T.copy()
         GnN = np.einsum("ia,ib->iab", Gn, N).reshape(-1, 9)
         GtN = np.einsum("ia,ib->iab", Gt, N).reshape(-1, 9)
-        scale = 1.0 + max(np.abs(w0).max(), np.abs(d).max(), p.max(initial=0.0))
+        # the model is homogeneous in the force scale (unit springs): no absolute floor
+        scale = np.abs(w0).max() + p.max(initial=0.0) + 1e-300
         That = T / np.linalg.norm(T, axis=1, keepdims=True)
         Tperp = np.linalg.svd(That[:, None, :])[2][:, 1:, :].transpose(0, 2, 1)
-        return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, That, Tperp, w0, d, 1e-9 * scale)
+        return cls(grasp, T, N, p, grasp.mu, Gn, Gt, GnN, GtN, That, Tperp, w0, d, _EPS * scale)
 
 
 def _first_true(mask: NDArray[np.bool_], k: int) -> NDArray[np.intp]:
@@ -347,6 +349,13 @@ def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
     nrp = roll_p.sum(axis=1)
     nu = nmot + nrp
     M = -(Q @ B)
+    # motion columns that vanish relative to what they are built from are exactly zero:
+    # round-off must not pose as a direction (it would "solve" singular systems)
+    qscale = Pf @ (np.linalg.norm(ctx.Gn, axis=1) * np.linalg.norm(ctx.N, axis=1)) + (
+        Pf * ctx.mu
+    ) @ (np.linalg.norm(ctx.Gt, axis=1) * np.linalg.norm(ctx.N, axis=1))
+    tiny = np.linalg.norm(M, axis=1) <= 1e-12 * qscale[:, None]
+    M[np.repeat(tiny[:, None, :], 3, axis=1)] = 0.0
     ridx = _first_true(roll_p, min(3, m))
     rows = np.arange(K)
     for j in range(ridx.shape[1]):
@@ -422,7 +431,7 @@ def _batch(ctx: _Ctx, pr: _Prep, s_max: float = 0.0):
         # rhs0 + s rhs1 lies in range(M) (components e0 + s e1 off the range vanish)
         e0 = np.einsum("kai,ka->ki", pr.U_perp, rhs0[rest])
         e1 = np.einsum("kai,ka->ki", pr.U_perp, rhs1[rest])
-        etol = 1e-9 * (1.0 + np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
+        etol = _EPS * (np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
         n1 = (e1**2).sum(axis=1)
         s_star = np.clip(-(e0 * e1).sum(axis=1) / np.maximum(n1, 1e-300), 0.0, s_max)
         resid = np.where(
@@ -480,40 +489,46 @@ def _forces(ctx: _Ctx, S, P, r, ct):
     return np.stack([cn, c_t], axis=-1)
 
 
-def _stage_bounds(g0, g1, tol, lo, hi, hx, s_max):
-    """Tighten ``[lo, hi]`` (with slack ``tol``) and ``hx`` (exact upper end) by
-    ``g0 + s g1 >= 0`` for ``s in [0, s_max]``.
+def _stage_bounds(g0, g1, e0, e1, lo, hi, hx, s_max):
+    """Tighten ``[lo, hi]`` and ``hx`` by the row ``g0 + s g1 >= 0`` on ``s in [0, s_max]``.
 
-    A slope whose effect over the whole range is below ``tol`` is round-off:
-    the row is then checked as constant, so noise cannot cut intervals.
+    The slack grows with the solution at the ``s`` tested: the row passes when
+    ``(g0 + e0) + s (g1 + e1) >= 0`` with ``e0 = eps (1 + |r0|)`` and
+    ``e1 = eps |r1|``, so round-off in a row (relative to the motion it comes
+    from) never cuts an interval and the slack does not depend on ``s_max``.
+    ``hx`` is the exact upper end from rows whose slope is clearly negative.
     """
-    eps = tol / max(s_max, 1.0)
-    pos = g1 > eps
-    neg = g1 < -eps
+    a0 = g0 + e0
+    a1 = g1 + e1
+    pos = a1 > 0
+    neg = a1 < 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        slack = (-tol - g0) / g1
+        bound = -a0 / a1
         exact = -g0 / g1
-    lo = np.maximum(lo, np.max(np.where(pos, slack, 0.0), axis=1, initial=0.0))
-    hi = np.minimum(hi, np.min(np.where(neg, slack, s_max), axis=1, initial=s_max))
-    hx = np.minimum(hx, np.min(np.where(neg, exact, s_max), axis=1, initial=s_max))
-    bad = np.any(~pos & ~neg & (g0 < -tol), axis=1)
+    lo = np.maximum(lo, np.max(np.where(pos, bound, 0.0), axis=1, initial=0.0))
+    hi = np.minimum(hi, np.min(np.where(neg, bound, s_max), axis=1, initial=s_max))
+    steep = g1 < -e1
+    hx = np.minimum(hx, np.min(np.where(steep, exact, s_max), axis=1, initial=s_max))
+    bad = np.any(~pos & ~neg & (a0 < 0), axis=1)
     return lo, np.where(bad, -np.inf, hi), hx
 
 
 def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
     """For each state, the interval of ``s in [0, s_max]`` where its solution holds.
 
-    Conditions (all closed, tolerance ``tol``), checked in stages on the
-    surviving states only: contact normal state, slip direction, friction
+    Conditions (all closed, relative tolerance ``ctx.tol`` per unit of
+    motion, see :func:`_stage_bounds`), checked in stages on the surviving
+    states only: contact normal state, slip direction and rolling, friction
     cone of rolling contacts, and equilibrium. Returns ``(feasible, s_hi)``
-    with ``s_hi`` the exact largest feasible ``s``.
+    with ``s_hi`` the largest feasible ``s`` (exact up to round-off).
     """
     K = len(S)
     lo = np.zeros(K)
     hi = np.full(K, s_max)
     hx = np.full(K, s_max)
     hi[~alive] = -np.inf
-    tol = ctx.tol * (1.0 + np.abs(r0).max(axis=1) + max(s_max, 1.0) * np.abs(r1).max(axis=1))
+    e0 = ctx.tol + _EPS * np.abs(r0).max(axis=1)
+    e1 = _EPS * (np.abs(ctx.d).max() + np.abs(r1).max(axis=1))
 
     def live():
         return np.flatnonzero(lo <= hi)
@@ -522,24 +537,28 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
 
     def update(idx, g0, g1):
         if fixed:
-            hi[idx[np.any(g0 < -tol[idx, None], axis=1)]] = -np.inf
+            hi[idx[np.any(g0 < -e0[idx, None], axis=1)]] = -np.inf
             return
         lo[idx], hi[idx], hx[idx] = _stage_bounds(
-            g0, g1, tol[idx, None], lo[idx], hi[idx], hx[idx], s_max
+            g0, g1, e0[idx, None], e1[idx, None], lo[idx], hi[idx], hx[idx], s_max
         )
 
     if fixed:  # normal: persist N r - p <= tol, detach N r - p >= -tol
         dN = r0 @ ctx.N.T
         dN -= ctx.p
-        t = tol[:, None]
+        t = e0[:, None]
         hi[np.any(np.where(P, dN > t, dN < -t), axis=1)] = -np.inf
     else:
         idx = live()  # normal: persist p - N r >= 0, detach N r - p >= 0
         sg = np.where(P[idx], -1.0, 1.0)
         update(idx, sg * (r0[idx] @ ctx.N.T - ctx.p), sg * (r1[idx] @ ctx.N.T))
-    idx = live()  # slip direction: s_i T_i r >= 0
+    idx = live()  # slip direction s_i T_i r >= 0; rolling |T_i r| <= tol
     Si = S[idx].astype(float)
-    update(idx, Si * (r0[idx] @ ctx.T.T), Si * (r1[idx] @ ctx.T.T))
+    dT0, dT1 = r0[idx] @ ctx.T.T, r1[idx] @ ctx.T.T
+    update(idx, Si * dT0, Si * dT1)
+    rolling = Si == 0
+    for sign in (1.0, -1.0):
+        update(idx, np.where(rolling, sign * dT0, 0.0), np.where(rolling, sign * dT1, 0.0))
     idx = live()  # forces: cone of rolling contacts, then equilibrium
     Pi, Si = P[idx], S[idx]
     cn0 = np.where(Pi, ctx.p - r0[idx] @ ctx.N.T, 0.0)
@@ -553,14 +572,38 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
             np.where(roll, ctx.mu * cn0 - sign * ct_0, 0.0),
             np.where(roll, ctx.mu * cn1 - sign * ct_1, 0.0),
         )
-    e0 = cn0 @ ctx.Gn + ct_0 @ ctx.Gt + ctx.w0
-    e1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + ctx.d
+    q0 = cn0 @ ctx.Gn + ct_0 @ ctx.Gt + ctx.w0
+    q1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + ctx.d
     keep = lo[idx] <= hi[idx]
-    idx, e0, e1 = idx[keep], e0[keep], e1[keep]
-    update(idx, e0, e1)
-    update(idx, -e0, -e1)
+    idx, q0, q1 = idx[keep], q0[keep], q1[keep]
+    update(idx, q0, q1)
+    update(idx, -q0, -q1)
     feas = lo <= hi
     return feas, np.clip(hx, lo, hi)
+
+
+def _certified(ctx: _Ctx, S, P, r, ct, s: float, rtol: float = 1e-7) -> bool:
+    """Final check of one candidate against the model itself (not the state's system).
+
+    Equilibrium, spring law, cone and maximum dissipation must hold to
+    ``rtol`` relative to the forces involved (dissipation: times the motion).
+    Guards every "stable" answer against ill-conditioned state systems.
+    """
+    c = _forces(ctx, S[None], P[None], r[None], ct[None])[0]
+    cn, c_t = c[:, 0], c[:, 1]
+    w = ctx.w0 + s * ctx.d
+    F = np.abs(w).max() + ctx.p.max(initial=0.0) + np.abs(c).max() + 1e-300
+    tol = rtol * F
+    dN = ctx.N @ r
+    dT = ctx.T @ r
+    eq = np.abs(cn @ ctx.Gn + c_t @ ctx.Gt + w).max()
+    spring = np.abs(cn - np.maximum(0.0, ctx.p - dN)).max()
+    cone = np.max(np.abs(c_t) - ctx.mu * cn)
+    mdp = np.max(np.abs(c_t * dT + ctx.mu * cn * np.abs(dT)))
+    return bool(
+        eq <= tol and spring <= tol and cone <= tol and cn.min() >= -tol
+        and mdp <= tol * np.abs(r).max()
+    )
 
 
 def _names(S, P) -> NDArray[np.str_]:
@@ -655,30 +698,53 @@ def _solve_planar(
     if not isinstance(chunk, int | np.integer) or chunk < 1:
         raise GraspError(f"option chunk must be a positive integer, got {chunk!r}")
     p = _preload(grasp, query.preload)
+    # Work in units where the grasp has size 1: the model is invariant under
+    # points -> points / L with torques / L and rotations * L, and tolerances
+    # are then dimensionally consistent (unit springs: force ~ length).
+    L, unit = _unit_grasp(grasp)
+    scale = np.array([1.0, 1.0, 1.0 / L])
     if isinstance(query, Existence):
         w = grasp.wrench(query.wrench)
-        return _existence(grasp, query, p, w, chunk)
-    d, cap = checked_direction_cap(grasp, query)
-    return _max_disturbance(grasp, query, p, d, cap, chunk)
+        sol = _existence(unit, query, p, w * scale, chunk)
+    else:
+        d, cap = checked_direction_cap(grasp, query)
+        sol = _max_disturbance(unit, query, p, d * scale, cap, chunk)
+    sol.grasp = grasp
+    if sol.motion is not None:
+        sol.motion = sol.motion * scale  # theta = theta_unit / L
+    return sol
+
+
+def _unit_grasp(grasp: Grasp) -> tuple[float, Grasp]:
+    """``(L, grasp with points / L)``, ``L`` the largest contact distance from the origin."""
+    cached = grasp.__dict__.get("_planar_unit")
+    if cached is None:
+        L = float(np.abs(grasp.points).max())
+        L = L if L > 0 else 1.0
+        cached = (L, Grasp(grasp.points / L, grasp.normals, grasp.mu))
+        grasp.__dict__["_planar_unit"] = cached
+    return cached
 
 
 def _existence(grasp, query, p, w, chunk) -> Solution:
     ctx = _Ctx.make(grasp, p, w, np.zeros(3))
-    n_states = n_lp = 0
+    n_states = n_lp = n_rejected = 0
     for pr in _prepared(grasp, ctx, p, chunk):
         S, P = pr.S, pr.P
         n_states += len(S)
         r0, r1, ct0, ct1, lp, skip, _ = _batch(ctx, pr)
         ok, _ = _intervals(ctx, S, P, r0, r1, ct0, ct1, 0.0, ~lp & ~skip)
-        hit = np.flatnonzero(ok)
-        if len(hit):
-            k = hit[0]
-            stats = {"states": n_states, "lps": n_lp}
-            return _solution(grasp, query, ctx, S[k], P[k], r0[k], ct0[k], 0.0, True, None, stats)
+        for k in np.flatnonzero(ok):
+            if _certified(ctx, S[k], P[k], r0[k], ct0[k], 0.0):
+                stats = {"states": n_states, "lps": n_lp}
+                return _solution(
+                    grasp, query, ctx, S[k], P[k], r0[k], ct0[k], 0.0, True, None, stats
+                )
+            n_rejected += 1
         for k in np.flatnonzero(lp):
             n_lp += 1
             res = _lp_state(ctx, S[k], P[k], (0.0, 0.0), sense=0)
-            if res is not None:
+            if res is not None and _certified(ctx, S[k], P[k], res[0], res[1], 0.0):
                 r, ct, _ = res
                 stats = {"states": n_states, "lps": n_lp}
                 return _solution(grasp, query, ctx, S[k], P[k], r, ct, 0.0, True, None, stats)
@@ -687,7 +753,7 @@ def _existence(grasp, query, p, w, chunk) -> Solution:
         method="planar",
         grasp=grasp,
         query=query,
-        stats={"states": n_states, "lps": n_lp},
+        stats={"states": n_states, "lps": n_lp, "rejected": n_rejected},
     )
 
 
@@ -695,17 +761,20 @@ def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
     ctx = _Ctx.make(grasp, p, np.zeros(3), d)
     pending: list[tuple[float, NDArray[np.int8], NDArray[np.bool_]]] = []
     best: tuple[float, Any] = (-1.0, None)
-    n_states = n_lp = 0
+    n_states = n_lp = n_rejected = 0
     for pr in _prepared(grasp, ctx, p, chunk):
         S, P = pr.S, pr.P
         n_states += len(S)
         r0, r1, ct0, ct1, lp, skip, s_ub = _batch(ctx, pr, cap)
         feas, hi = _intervals(ctx, S, P, r0, r1, ct0, ct1, cap, ~lp & ~skip)
-        if feas.any():
-            k = np.flatnonzero(feas)[np.argmax(hi[feas])]
-            if hi[k] > best[0]:
-                s = hi[k]
-                best = (s, (S[k], P[k], r0[k] + s * r1[k], ct0[k] + s * ct1[k]))
+        cand = np.flatnonzero(feas & (hi > best[0]))
+        for k in cand[np.argsort(-hi[cand])]:  # best first; the first certified one wins
+            s = hi[k]
+            r, ct = r0[k] + s * r1[k], ct0[k] + s * ct1[k]
+            if _certified(ctx, S[k], P[k], r, ct, s):
+                best = (s, (S[k], P[k], r, ct))
+                break
+            n_rejected += 1
         pending += [(s_ub[k], S[k], P[k]) for k in np.flatnonzero(lp)]
     # LP states last, most promising first; stop once none can beat the best s
     pending.sort(key=lambda x: -x[0])
@@ -714,10 +783,10 @@ def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
             break
         n_lp += 1
         res = _lp_state(ctx, S_k, P_k, (0.0, min(ub, cap)), sense=1)
-        if res is not None and res[2] > best[0]:
+        if res is not None and res[2] > best[0] and _certified(ctx, S_k, P_k, *res):
             r, ct, s = res
             best = (s, (S_k, P_k, r, ct))
-    stats: dict[str, Any] = {"states": n_states, "lps": n_lp}
+    stats: dict[str, Any] = {"states": n_states, "lps": n_lp, "rejected": n_rejected}
     if best[1] is None:
         stats["capped"] = False
         return Solution(

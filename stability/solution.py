@@ -62,8 +62,11 @@ class Solution:
     Attributes
     ----------
     stable : bool
-        Existence: an equilibrium exists. MaxDisturbance: the grasp is stable
-        at ``s = value`` (False only when not even ``s = 0`` is stable).
+        Existence: an equilibrium exists. MaxDisturbance: some ``s`` in
+        ``[0, cap]`` is stable, and ``value`` is the largest such ``s`` (the
+        supremum of the stable set along the ray, which need not be an
+        interval starting at 0; with an unbalanced preload ``s = 0`` itself
+        can be unstable).
     forces : (m, 2) or (m, 3) array or None
         Contact forces on the object in contact frames, ``[c_n, c_t]`` planar,
         ``[c_n, c_t1, c_t2]`` spatial [N].

@@ -294,7 +294,10 @@ def naive_stable(
     """
     m, Dn, Dt, G, mu_a, pre, w = _setup(points, normals, mu, wrench, preload)
     if backend == "highspy":
-        combo, x = _stable_highspy(m, Dn, Dt, G, mu_a, pre, w)
+        try:
+            combo, x = _stable_highspy(m, Dn, Dt, G, mu_a, pre, w)
+        except RuntimeError:  # a warm-started solve ended in an unknown status: start over
+            combo, x = _stable_scipy(m, Dn, Dt, G, mu_a, pre, w)
     elif backend == "scipy":
         combo, x = _stable_scipy(m, Dn, Dt, G, mu_a, pre, w)
     else:

@@ -176,3 +176,47 @@ def test_large_m_solutions_satisfy_model():
         sol = solve(g, Existence(wrench=rng.normal(size=3) * 3, preload=1.0))
         if sol.stable:
             assert sol.max_residual() <= 1e-7
+
+
+# Regression cases from review: singular state systems whose round-off "solved" them
+# (false stable with huge motions), and grasps whose answer changed with their units.
+SINGULAR = [
+    ([[1, 1], [0, 1]], [[1, -1], [0, -1]], 0.0, [0, 0, -1], [0, 0]),
+    ([[-1, -1], [0, -1], [0, -1]], [[1, 1], [-1, 0], [0, 1]], 0.3, [-1, -1, -1], 0.0),
+    ([[1, -1], [1, -2], [-2, 2]], [[-1, -1], [1, -1], [1, -1]], 1.0, [2, -1, 0], [0, 0, 1]),
+]
+
+
+@pytest.mark.parametrize(("pts", "nrm", "mu", "w", "pre"), SINGULAR)
+def test_singular_systems_are_not_solutions(pts, nrm, mu, w, pre):
+    g = Grasp(pts, nrm, mu)
+    assert not solve(g, Existence(wrench=w, preload=pre)).stable
+    md = solve(g, MaxDisturbance(direction=w, preload=pre, cap=1e3))
+    assert not md.stats["capped"]
+    assert md.value is None or md.value < 1e-9
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_answers_do_not_depend_on_units(scale):
+    """Points * L with torques * L (and any force scale k) is the same grasp problem."""
+    rng = np.random.default_rng(42)
+    for _ in range(25):
+        m = int(rng.integers(2, 5))
+        pts = rng.uniform(-1, 1, (m, 2))
+        ang = rng.uniform(0, 2 * np.pi, m)
+        nrm = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        w = rng.normal(size=3)
+        p = rng.uniform(0, 1.5, m)
+        k = 1e4 if scale != 1.0 else 1.0
+        ref = solve(Grasp(pts, nrm, 0.4), Existence(wrench=w, preload=p))
+        ws = np.array([w[0], w[1], w[2] * scale]) * k
+        sol = solve(Grasp(pts * scale, nrm, 0.4), Existence(wrench=ws, preload=p * k))
+        assert sol.stable == ref.stable
+        if sol.stable:
+            assert sol.max_residual() <= 1e-7 * k * (1 + np.abs(ws).max())
+        d = solve(Grasp(pts, nrm, 0.4), MaxDisturbance(direction=w, preload=p, cap=50.0))
+        ds = solve(
+            Grasp(pts * scale, nrm, 0.4), MaxDisturbance(direction=ws, preload=p * k, cap=1e6)
+        )
+        if d.stable and not d.stats["capped"]:
+            assert ds.value == pytest.approx(d.value, rel=1e-6, abs=1e-9)
