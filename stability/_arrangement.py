@@ -263,16 +263,9 @@ def affine_faces(
         may_zero = np.concatenate([may_zero, np.zeros(len(dummies), dtype=bool)])
     Pe = len(A)
     through0 = np.abs(b) <= _TOL
-    # origin: handled as one (usually non-simple) vertex when it is a vertex at all
     Z0 = np.flatnonzero(through0)
-    # vertices: every independent triple (triples of planes through the origin give the
-    # origin, handled below); |det| of unit normals down to 1e-13 still gives a vertex
-    tri = _triples(Pe)
-    tri = tri[~np.all(through0[tri], axis=1)] if len(tri) else tri
-    A3 = A[tri]
-    ok = np.abs(np.linalg.det(A3)) > 1e-13 if len(tri) else np.zeros(0, dtype=bool)
-    tri = tri[ok]
-    V = np.linalg.solve(A3[ok], b[tri][..., None])[..., 0] if len(tri) else np.zeros((0, 3))
+    # the origin first, as one (usually non-simple) vertex when it is a vertex at all:
+    # small motions from the unloaded state are the usual answer
     origin_is_vertex = len(Z0) >= 3 and np.linalg.matrix_rank(A[Z0], tol=1e-9) == 3
     if origin_is_vertex:
         base = signs(-b)
@@ -280,6 +273,14 @@ def affine_faces(
         f = np.repeat(base[None, :], len(local), axis=0)
         f[:, Z0] = local
         yield f[:, :P]
+    # vertices: every independent triple (triples of planes through the origin give the
+    # origin, handled above); |det| of unit normals down to 1e-13 still gives a vertex
+    tri = _triples(Pe)
+    tri = tri[~np.all(through0[tri], axis=1)] if len(tri) else tri
+    A3 = A[tri]
+    ok = np.abs(np.linalg.det(A3)) > 1e-13 if len(tri) else np.zeros(0, dtype=bool)
+    tri = tri[ok]
+    V = np.linalg.solve(A3[ok], b[tri][..., None])[..., 0] if len(tri) else np.zeros((0, 3))
     # bounding simplex around every vertex: faces unbounded below get a lowest vertex on it
     R = 1.0 + 2.0 * (float(np.abs(V @ _SIMPLEX.T).max()) if len(V) else 0.0)
     Ab = np.concatenate([A, _SIMPLEX])

@@ -170,10 +170,12 @@ def _state_chunks(
     _, _, Au, bu, idx, orient, may_zero = _planes(grasp, p)
     buf: list[NDArray[np.int8]] = []
     rows = 0
+    first = True
     for f in affine_faces(Au, bu, may_zero, chunk=chunk):
         buf.append(f)
         rows += len(f)
-        if rows >= chunk:
+        if rows >= chunk or first:  # the first piece (the origin's faces) goes out alone
+            first = False
             sv = np.concatenate(buf)[:, idx] * orient
             yield sv[:, :m], sv[:, m:] <= 0
             buf, rows = [], 0
@@ -601,7 +603,10 @@ def _certified(ctx: _Ctx, S, P, r, ct, s: float, rtol: float = 1e-7) -> bool:
     cone = np.max(np.abs(c_t) - ctx.mu * cn)
     mdp = np.max(np.abs(c_t * dT + ctx.mu * cn * np.abs(dT)))
     return bool(
-        eq <= tol and spring <= tol and cone <= tol and cn.min() >= -tol
+        eq <= tol
+        and spring <= tol
+        and cone <= tol
+        and cn.min() >= -tol
         and mdp <= tol * np.abs(r).max()
     )
 
