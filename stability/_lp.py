@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import highspy
 import numpy as np
 from numpy.typing import NDArray
 
 from .errors import SolverError
 
-__all__ = ["solve_lp", "INF"]
+__all__ = ["solve_lp", "LPResult", "INF"]
 
 INF = highspy.kHighsInf
+
+
+class LPResult(NamedTuple):
+    """``feasible``; ``x`` and ``objective`` (None when infeasible); simplex ``iterations``."""
+
+    feasible: bool
+    x: NDArray[np.float64] | None
+    objective: float | None
+    iterations: int
 
 
 def solve_lp(
@@ -23,12 +34,13 @@ def solve_lp(
     maximize: bool = False,
     time_limit_s: float = 60.0,
     feas_tol: float = 1e-9,
-) -> tuple[bool, NDArray[np.float64] | None, float | None]:
+) -> LPResult:
     """Solve ``min/max cost.x  s.t.  row_lower <= A x <= row_upper, col_lower <= x <= col_upper``.
 
-    Returns ``(feasible, x, objective)``; ``(False, None, None)`` when HiGHS
-    proves infeasibility. Unbounded problems and any other status raise
-    :class:`SolverError` naming the HiGHS status.
+    Infinite bounds may be given as ``numpy.inf``. The callers' objectives are
+    bounded (feasibility problems, or a bounded variable), so HiGHS's
+    "unbounded or infeasible" means infeasible. Any other non-optimal status
+    (time limit, numerical trouble) raises :class:`SolverError` naming it.
     """
     A = np.asarray(A, dtype=float)
     nrow, ncol = A.shape
@@ -57,11 +69,16 @@ def solve_lp(
     h.passModel(lp)
     h.run()
     status = h.getModelStatus()
+    info = h.getInfo()
+    iters = int(info.simplex_iteration_count)
     if status == highspy.HighsModelStatus.kOptimal:
         x = np.array(h.getSolution().col_value)
-        return True, x, float(h.getInfo().objective_function_value)
-    if status == highspy.HighsModelStatus.kInfeasible:
-        return False, None, None
+        return LPResult(True, x, float(info.objective_function_value), iters)
+    if status in (
+        highspy.HighsModelStatus.kInfeasible,
+        highspy.HighsModelStatus.kUnboundedOrInfeasible,
+    ):
+        return LPResult(False, None, None, iters)
     if status == highspy.HighsModelStatus.kTimeLimit:
         raise SolverError(f"HiGHS hit its time limit of {time_limit_s} s")
     raise SolverError(f"HiGHS returned status {h.modelStatusToString(status)}")

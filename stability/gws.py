@@ -37,12 +37,11 @@ origin [N, N m].
 
 from __future__ import annotations
 
-import highspy
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import csc_matrix
 from scipy.spatial import ConvexHull, QhullError
 
+from ._lp import solve_lp
 from .api import register
 from .errors import GraspError, SolverError
 from .grasp import Grasp
@@ -186,43 +185,11 @@ def _solve_lp(
 ) -> tuple[NDArray[np.float64] | None, int]:
     """Minimise ``cost . x`` s.t. ``row_lower <= A x <= row_upper``, column bounds.
 
-    Returns ``(x, simplex_iterations)``, ``x`` None when infeasible. Raises
-    SolverError on any other non-optimal status.
+    Returns ``(x, simplex_iterations)``, ``x`` None when infeasible (both LPs
+    here have bounded objectives). Raises SolverError on any other status.
     """
-    inf = highspy.kHighsInf
-    lp = highspy.HighsLp()
-    lp.num_col_ = A.shape[1]
-    lp.num_row_ = A.shape[0]
-    lp.col_cost_ = cost
-    lp.col_lower_ = col_lower
-    lp.col_upper_ = np.where(np.isinf(col_upper), inf, col_upper)
-    lp.row_lower_ = np.where(np.isinf(row_lower), -inf, row_lower)
-    lp.row_upper_ = np.where(np.isinf(row_upper), inf, row_upper)
-    M = csc_matrix(A)
-    M.eliminate_zeros()
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.num_col_ = A.shape[1]
-    lp.a_matrix_.num_row_ = A.shape[0]
-    lp.a_matrix_.start_ = M.indptr
-    lp.a_matrix_.index_ = M.indices
-    lp.a_matrix_.value_ = M.data
-    h = highspy.Highs()
-    h.silent()
-    h.setOptionValue("primal_feasibility_tolerance", 1e-10)
-    h.setOptionValue("dual_feasibility_tolerance", 1e-10)
-    h.passModel(lp)
-    h.run()
-    status = h.getModelStatus()
-    iters = int(h.getInfo().simplex_iteration_count)
-    if status == highspy.HighsModelStatus.kOptimal:
-        return np.array(h.getSolution().col_value, dtype=float), iters
-    if status in (highspy.HighsModelStatus.kInfeasible,):
-        return None, iters
-    if status == highspy.HighsModelStatus.kUnboundedOrInfeasible:
-        # Both LPs here have bounded objectives (lam >= 0 minimised, or s <= cap),
-        # so "unbounded or infeasible" can only mean infeasible.
-        return None, iters
-    raise SolverError(f"gws LP: HiGHS returned status {h.modelStatusToString(status)!r}")
+    res = solve_lp(cost, A, row_lower, row_upper, col_lower, col_upper, feas_tol=1e-10)
+    return res.x, res.iterations
 
 
 def _forces(grasp: Grasp, E: NDArray[np.float64], lam: NDArray[np.float64]) -> NDArray:

@@ -663,7 +663,7 @@ def _lp_state(ctx: _Ctx, S, P, s_bounds: tuple[float, float], sense: int):
     lb = np.full(nv, -INF)
     ub = np.full(nv, INF)
     lb[-1], ub[-1] = s_bounds
-    ok, x, _ = solve_lp(
+    ok, x, _, _ = solve_lp(
         cost, np.array(rows), np.array(lo), np.array(hi), lb, ub, maximize=sense > 0
     )
     if not ok:
@@ -826,7 +826,7 @@ def slip_states_thesis(grasp: Grasp) -> NDArray[np.int8]:
         for s in regions:
             for side in (1, -1):
                 rows = np.array([sj * T[j] for j, sj in enumerate(s)] + [side * T[i]])
-                ok, _, _ = solve_lp(
+                ok, _, _, _ = solve_lp(
                     np.zeros(3), rows, np.ones(len(rows)), np.full(len(rows), INF),
                     np.full(3, -INF), np.full(3, INF),
                 )  # fmt: skip
