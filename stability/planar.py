@@ -44,7 +44,7 @@ from .api import register
 from .errors import GraspError, MethodError
 from .grasp import Grasp, cross2
 from .queries import Existence, MaxDisturbance, checked_direction_cap
-from .solution import Solution
+from .solution import Solution, model_residuals
 
 __all__ = [
     "slip_states",
@@ -75,6 +75,14 @@ def _require_planar(grasp: Grasp) -> None:
         raise MethodError("the planar method needs a planar grasp (points of shape (m, 2))")
 
 
+def _slip_arrangement(grasp: Grasp):
+    """Distinct tangential planes ``Au`` (with ``idx``, ``orient`` back to contacts) and
+    the sign vectors of all faces of their central arrangement."""
+    T, _ = motion_planes(grasp)
+    Au, _, idx, orient = dedupe_planes(T, np.zeros(len(T)))
+    return Au, idx, orient, central_faces(Au)
+
+
 def slip_states(grasp: Grasp) -> NDArray[np.int8]:
     """Every slip state consistent with a rigid motion of the object: (K, m) in {-1, 0, 1}.
 
@@ -88,9 +96,7 @@ def slip_states(grasp: Grasp) -> NDArray[np.int8]:
     lines where both contacts roll share the all-rolling sign vector, so
     ``K = 9``; :func:`count_slip_faces` counts faces and gives the thesis' 10.
     """
-    T, _ = motion_planes(grasp)
-    Au, _, idx, orient = dedupe_planes(T, np.zeros(len(T)))
-    faces = central_faces(Au)
+    Au, idx, orient, faces = _slip_arrangement(grasp)
     S = faces[:, idx] * orient
     S = np.unique(S, axis=0)
     zero = np.flatnonzero(~S.any(axis=1))
@@ -106,9 +112,7 @@ def count_slip_faces(grasp: Grasp) -> dict[str, int]:
     planes meet only at the origin). ``total`` = regions + facets + lines is
     the thesis' ``#(S)``: ``4m^2 - 4m + 2`` for generic contacts.
     """
-    T, _ = motion_planes(grasp)
-    Au, _, _, _ = dedupe_planes(T, np.zeros(len(T)))
-    faces = central_faces(Au)
+    Au, _, _, faces = _slip_arrangement(grasp)
     rank_all = np.linalg.matrix_rank(Au)
     counts = {"regions": 0, "facets": 0, "lines": 0, "origin": 0}
     for f in faces:
@@ -334,6 +338,16 @@ class _Prep:
         return len(self.S)
 
 
+def _equilibrium_terms(ctx: _Ctx, S, P) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(Q, h)`` per state (K, 3, 3) and (K, 3): the wrench of the normal and slip forces
+    is ``sum_persist (Gn_i - mu_i s_i Gt_i)(p_i - N_i r) = h - Q r``."""
+    Pf = P.astype(float)
+    PS = Pf * S * ctx.mu
+    Q = (Pf @ ctx.GnN - PS @ ctx.GtN).reshape(-1, 3, 3)
+    h = Pf @ (ctx.p[:, None] * ctx.Gn) - PS @ (ctx.p[:, None] * ctx.Gt)
+    return Q, h
+
+
 def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
     """Build and factorise each state's system ``M z = -h - w0 - s d`` (eq. linear_system).
 
@@ -343,9 +357,7 @@ def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
     """
     K, m = S.shape
     Pf = P.astype(float)
-    PS = Pf * S * ctx.mu
-    Q = (Pf @ ctx.GnN - PS @ ctx.GtN).reshape(K, 3, 3)
-    h = Pf @ (ctx.p[:, None] * ctx.Gn) - PS @ (ctx.p[:, None] * ctx.Gt)
+    Q, h = _equilibrium_terms(ctx, S, P)
     B, nmot = _null_bases(ctx, S)
     roll_p = (S == 0) & P
     nrp = roll_p.sum(axis=1)
@@ -592,23 +604,11 @@ def _certified(ctx: _Ctx, S, P, r, ct, s: float, rtol: float = 1e-7) -> bool:
     Guards every "stable" answer against ill-conditioned state systems.
     """
     c = _forces(ctx, S[None], P[None], r[None], ct[None])[0]
-    cn, c_t = c[:, 0], c[:, 1]
     w = ctx.w0 + s * ctx.d
-    F = np.abs(w).max() + ctx.p.max(initial=0.0) + np.abs(c).max() + 1e-300
-    tol = rtol * F
-    dN = ctx.N @ r
-    dT = ctx.T @ r
-    eq = np.abs(cn @ ctx.Gn + c_t @ ctx.Gt + w).max()
-    spring = np.abs(cn - np.maximum(0.0, ctx.p - dN)).max()
-    cone = np.max(np.abs(c_t) - ctx.mu * cn)
-    mdp = np.max(np.abs(c_t * dT + ctx.mu * cn * np.abs(dT)))
-    return bool(
-        eq <= tol
-        and spring <= tol
-        and cone <= tol
-        and cn.min() >= -tol
-        and mdp <= tol * np.abs(r).max()
-    )
+    tol = rtol * (np.abs(w).max() + ctx.p.max(initial=0.0) + np.abs(c).max() + 1e-300)
+    res = model_residuals(ctx.grasp, w, c, r, ctx.p)
+    dissipation = res.pop("max_dissipation")
+    return max(res.values()) <= tol and dissipation <= tol * np.abs(r).max()
 
 
 def _names(S, P) -> NDArray[np.str_]:
@@ -630,9 +630,8 @@ def _lp_state(ctx: _Ctx, S, P, s_bounds: tuple[float, float], sense: int):
         lo.append(lb)
         hi.append(ub)
 
-    Pf = P.astype(float)
-    Q = ((Pf @ ctx.GnN) - (Pf * S * ctx.mu) @ ctx.GtN).reshape(3, 3)
-    h = Pf @ (ctx.p[:, None] * ctx.Gn) - (Pf * S * ctx.mu) @ (ctx.p[:, None] * ctx.Gt)
+    Q, h = _equilibrium_terms(ctx, S[None], P[None])
+    Q, h = Q[0], h[0]
     for a in range(3):  # equilibrium: -Q r + Gt c_t + s d = -h - w0
         row = np.zeros(nv)
         row[:3] = -Q[a]
