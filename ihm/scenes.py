@@ -1,0 +1,297 @@
+"""Grasp scenes of the thesis: load an MJCF scene and settle the grasp.
+
+A scene is one file ``assets/scenes/<name>.xml`` that includes a hand model
+and adds the grasped object. Everything :func:`load_scene` needs is in that
+file, so that adding a scene is adding a file:
+
+* a body named ``object`` with a free joint (also named ``object``);
+* a keyframe named ``init``: the hand slightly open around the object;
+* ``<custom><numeric name="ihm_preload" data="..."/></custom>``: the default
+  commanded actuator forces, one per actuator, in the actuator's own unit
+  (N m for a joint motor, N for a tendon);
+* ``<custom><text name="ihm_hand" data="..."/></custom>``: the hand's name;
+* optionally ``<custom><text name="ihm_about" data="..."/></custom>``: one
+  line saying which grasp of the thesis the scene is.
+
+Settling (:func:`settle`) is documented there; it ends when every velocity of
+the model is below ``vtol`` for ``hold_s`` seconds of simulated time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from stability import GraspError
+
+__all__ = [
+    "SCENES_DIR",
+    "SceneError",
+    "SettleInfo",
+    "available_scenes",
+    "load_scene",
+    "scene_about",
+    "scene_path",
+    "settle",
+]
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "assets" / "scenes"
+
+
+class SceneError(GraspError):
+    """Unknown scene, a malformed scene file, or a grasp that does not settle."""
+
+
+def available_scenes() -> list[str]:
+    """Names of the scenes in ``assets/scenes`` (file stems), sorted."""
+    return sorted(p.stem for p in SCENES_DIR.glob("*.xml"))
+
+
+def scene_path(name: str) -> Path:
+    """Path of scene ``name``; :class:`SceneError` listing the known scenes if unknown."""
+    known = available_scenes()
+    if name not in known:
+        raise SceneError(f"unknown scene {name!r}; known scenes: {', '.join(known)}")
+    return SCENES_DIR / f"{name}.xml"
+
+
+def _custom_numeric(model: mujoco.MjModel, name: str) -> NDArray[np.float64] | None:
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+    if i < 0:
+        return None
+    adr, size = model.numeric_adr[i], model.numeric_size[i]
+    return np.array(model.numeric_data[adr : adr + size], dtype=float)
+
+
+def _custom_text(model: mujoco.MjModel, name: str) -> str | None:
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, name)
+    if i < 0:
+        return None
+    adr, size = model.text_adr[i], model.text_size[i]
+    return bytes(model.text_data[adr : adr + size]).split(b"\0", 1)[0].decode()
+
+
+def scene_about(name: str) -> str:
+    """The one-line description stored in the scene file (``ihm_about``)."""
+    model = mujoco.MjModel.from_xml_path(str(scene_path(name)))
+    return _custom_text(model, "ihm_about") or ""
+
+
+def default_preload(model: mujoco.MjModel) -> NDArray[np.float64]:
+    """The scene's default commanded actuator forces (``ihm_preload``), shape (nu,)."""
+    f = _custom_numeric(model, "ihm_preload")
+    if f is None:
+        raise SceneError("scene has no <numeric name='ihm_preload'> (default actuator forces)")
+    if f.shape != (model.nu,):
+        raise SceneError(f"ihm_preload has {f.size} values for {model.nu} actuators")
+    return f
+
+
+@dataclass
+class SettleInfo:
+    """What :func:`settle` did.
+
+    Attributes
+    ----------
+    time_s : simulated time until rest [s]
+    wall_s : wall-clock time of the settle [s]
+    steps : simulation steps taken
+    max_vel : largest ``|qvel|`` at the end [m/s or rad/s]
+    commands : actuator forces commanded [actuator units]
+    rounds : setpoint rounds (position actuators only; 1 otherwise)
+    """
+
+    time_s: float
+    wall_s: float
+    steps: int
+    max_vel: float
+    commands: NDArray[np.float64]
+    rounds: int = 1
+    contacts: int = 0
+    extras: dict = field(default_factory=dict)
+
+
+def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
+    """``kp`` of position-servo actuators (force = kp (ctrl - length)), 0 for others.
+
+    A position actuator has ``gainprm[0] = kp`` and ``biasprm[:2] = (0, -kp)``.
+    """
+    kp = np.zeros(model.nu)
+    for a in range(model.nu):
+        g, b = model.actuator_gainprm[a], model.actuator_biasprm[a]
+        if model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE and np.isclose(
+            b[1], -g[0]
+        ):
+            kp[a] = g[0]
+    return kp
+
+
+def _run_until_rest(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    vtol: float,
+    hold_s: float,
+    min_s: float,
+    max_s: float,
+) -> tuple[int, float]:
+    """Step until ``max |qvel| < vtol`` for ``hold_s`` [s]; returns (steps, max |qvel|)."""
+    dt = model.opt.timestep
+    hold_steps = max(1, int(round(hold_s / dt)))
+    min_steps = int(round(min_s / dt))
+    max_steps = int(round(max_s / dt))
+    calm = 0
+    vmax = np.inf
+    for k in range(max_steps):
+        mujoco.mj_step(model, data)
+        vmax = float(np.abs(data.qvel).max()) if model.nv else 0.0
+        if not np.isfinite(vmax):
+            raise SceneError(f"simulation diverged (qvel not finite) at t = {data.time:.3f} s")
+        calm = calm + 1 if vmax < vtol else 0
+        if calm >= hold_steps and k + 1 >= min_steps:
+            return k + 1, vmax
+    return max_steps, vmax
+
+
+def settle(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    commands: ArrayLike,
+    *,
+    vtol: float = 1e-4,
+    hold_s: float = 0.05,
+    grip_s: float = 0.3,
+    max_s: float = 10.0,
+    rounds: int = 6,
+    ftol: float = 1e-3,
+) -> SettleInfo:
+    """Close the hand with actuator forces ``commands`` until the grasp is at rest.
+
+    Procedure (simulated time, ``model.opt.timestep`` per step):
+
+    1. *Grip* for ``grip_s`` seconds with gravity switched off, so that the
+       fingers close on the object before it can fall (servos track
+       ``ctrl = length + f_c / kp`` every step: a pure force source).
+    2. Switch gravity back on and step until every generalized velocity is
+       below ``vtol`` [m/s, rad/s] for ``hold_s`` consecutive seconds.
+    3. Position-servo actuators (``force = kp (ctrl - length)``, the four-finger
+       hand's series-elastic joints) are driven to the commanded *force*: each
+       round sets ``ctrl = length + f_c / kp`` and repeats step 2, until
+       ``|actuator_force - f_c| <= ftol (1 + |f_c|)`` or ``rounds`` rounds.
+       Motors (``force = ctrl``) get ``ctrl = f_c`` once.
+
+    Raises :class:`SceneError` if the grasp is not at rest after ``max_s``
+    simulated seconds (per round), or the simulation diverges.
+    """
+    import time
+
+    f_c = np.asarray(commands, dtype=float).reshape(-1)
+    if f_c.shape != (model.nu,):
+        raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
+    if not np.all(np.isfinite(f_c)):
+        raise SceneError("commands contain NaN or inf")
+    t0 = time.perf_counter()
+    kp = _position_gain(model)
+    servo = kp > 0
+    gain = np.where(servo, 1.0, model.actuator_gainprm[:, 0])
+    if np.any(~servo & (np.abs(gain) < 1e-12)):
+        raise SceneError("an actuator has zero gain; cannot command its force")
+
+    def set_ctrl() -> None:
+        ctrl = np.where(servo, data.actuator_length + f_c / np.where(servo, kp, 1.0), f_c / gain)
+        data.ctrl[:] = ctrl
+
+    mujoco.mj_forward(model, data)
+    set_ctrl()
+    steps = 0
+    gravity = model.opt.gravity.copy()
+    try:
+        model.opt.gravity[:] = 0.0
+        n_grip = int(round(grip_s / model.opt.timestep))
+        for _ in range(n_grip):
+            set_ctrl()  # servos act as pure force sources while the fingers close
+            mujoco.mj_step(model, data)
+        steps += n_grip
+    finally:
+        model.opt.gravity[:] = gravity
+    done_rounds = 0
+    vmax = np.inf
+    for done_rounds in range(1, rounds + 1):  # noqa: B007
+        k, vmax = _run_until_rest(model, data, vtol, hold_s, 0.0, max_s)
+        steps += k
+        if vmax >= vtol:
+            raise SceneError(
+                f"grasp not at rest after {max_s:.1f} s simulated (max |qvel| = {vmax:.3g} "
+                f"> {vtol:g}); the object may have slipped out"
+            )
+        if not servo.any():
+            break
+        err = np.abs(data.actuator_force - f_c)
+        if np.all(err <= ftol * (1 + np.abs(f_c))):
+            break
+        set_ctrl()
+    mujoco.mj_forward(model, data)
+    return SettleInfo(
+        time_s=float(data.time),
+        wall_s=time.perf_counter() - t0,
+        steps=steps,
+        max_vel=vmax,
+        commands=f_c,
+        rounds=done_rounds,
+        contacts=int(data.ncon),
+    )
+
+
+def load_scene(
+    name: str,
+    preload: ArrayLike | None = None,
+    *,
+    settle_grasp: bool = True,
+    **settle_kwargs: float,
+) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """Load scene ``name`` and settle its grasp.
+
+    Parameters
+    ----------
+    name : a scene in ``assets/scenes`` (see :func:`available_scenes`).
+    preload : commanded actuator forces, shape (nu,), in each actuator's unit
+        (N m for joint motors and servos, N for tendons). Default: the scene's
+        ``ihm_preload``.
+    settle_grasp : if False, return the ``init`` keyframe without simulating.
+    settle_kwargs : passed to :func:`settle` (``vtol``, ``hold_s``, ...).
+
+    Returns
+    -------
+    (model, data) with ``data`` at rest; ``data.ctrl`` holds the commands and
+    the settle report is in ``ihm.scenes.last_settle``.
+    """
+    global last_settle
+    path = scene_path(name)
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:  # mujoco reports XML errors as ValueError
+        raise SceneError(f"scene {name!r} ({path}) does not compile: {exc}") from exc
+    data = mujoco.MjData(model)
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "init")
+    if key < 0:
+        raise SceneError(f"scene {name!r} has no keyframe named 'init'")
+    mujoco.mj_resetDataKeyframe(model, data, key)
+    f_c = default_preload(model) if preload is None else np.asarray(preload, dtype=float)
+    if f_c.shape != (model.nu,):
+        raise SceneError(
+            f"preload for scene {name!r} needs {model.nu} actuator forces "
+            f"(actuators: {', '.join(model.actuator(i).name for i in range(model.nu))}), "
+            f"got shape {f_c.shape}"
+        )
+    if settle_grasp:
+        last_settle = settle(model, data, f_c, **settle_kwargs)
+    else:
+        data.ctrl[:] = 0.0
+        mujoco.mj_forward(model, data)
+    return model, data
+
+
+last_settle: SettleInfo | None = None
