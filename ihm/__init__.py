@@ -1,1 +1,23 @@
-"""ihm package."""
+"""MuJoCo glue: thesis scenes, contact extraction to :class:`stability.Grasp`, viewers.
+
+>>> import ihm
+>>> model, data = ihm.load_scene("barrett_box")          # doctest: +SKIP
+>>> grasp = ihm.grasp_from_mujoco(model, data)            # doctest: +SKIP
+>>> grasp.equilibrium_residuals()                         # doctest: +SKIP
+"""
+
+from .contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates, transmission
+from .scenes import SceneError, SettleInfo, available_scenes, load_scene, scene_about, settle
+
+__all__ = [
+    "SceneError",
+    "SceneGrasp",
+    "SettleInfo",
+    "available_scenes",
+    "grasp_from_mujoco",
+    "hand_coordinates",
+    "load_scene",
+    "scene_about",
+    "settle",
+    "transmission",
+]

@@ -141,14 +141,9 @@ def hand_coordinates(
     joints = [
         j
         for j in range(model.njnt)
-        if not in_obj[model.jnt_bodyid[j]]
-        and int(model.jnt_type[j]) in _HINGE_SLIDE
+        if not in_obj[model.jnt_bodyid[j]] and int(model.jnt_type[j]) in _HINGE_SLIDE
     ]
-    others = [
-        j
-        for j in range(model.njnt)
-        if not in_obj[model.jnt_bodyid[j]] and j not in joints
-    ]
+    others = [j for j in range(model.njnt) if not in_obj[model.jnt_bodyid[j]] and j not in joints]
     if others:
         raise GraspError(
             f"hand joints must be hinges or slides; got {[model.joint(j).name for j in others]}"

@@ -123,9 +123,7 @@ def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
     kp = np.zeros(model.nu)
     for a in range(model.nu):
         g, b = model.actuator_gainprm[a], model.actuator_biasprm[a]
-        if model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE and np.isclose(
-            b[1], -g[0]
-        ):
+        if model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE and np.isclose(b[1], -g[0]):
             kp[a] = g[0]
     return kp
 

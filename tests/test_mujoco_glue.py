@@ -1,0 +1,311 @@
+"""ihm glue against MuJoCo itself: kinematics (G, J) by finite differences through
+MuJoCo's forward kinematics, statics (G c + w_g = 0, J^T c = R f) with the forces
+MuJoCo computes, frame conventions, and bad input.
+
+The finite differences never use our G or J: they move the object (or one
+independent hand coordinate) in ``qpos``, let ``mj_kinematics`` place the
+bodies, and measure how the material contact points moved.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+import ihm
+from ihm.contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates
+from ihm.scenes import SceneError, load_scene, settle
+from stability import GraspError
+
+SCENES = ihm.available_scenes()
+EPS = 1e-6  # finite-difference step [m, rad]
+
+# Two fingers squeeze a box under gravity: a slide finger (capsule) and a finger
+# of two hinges coupled 1:2 by a joint equality (capsule + sphere tip). Capsules
+# and the box meet with the object as MuJoCo's geom2, the sphere tip with the
+# object as geom1 in the sphere variant, which exercises the frame flip.
+TOY = """
+<mujoco model="toy">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="0.001" jacobian="dense" cone="elliptic" integrator="implicitfast"
+          noslip_iterations="20"/>
+  <default>
+    <geom contype="0" conaffinity="1" mass="0.05"/>
+  </default>
+  <worldbody>
+    <body name="left" pos="-0.05 0 0" gravcomp="1">
+      <joint name="lslide" type="slide" axis="1 0 0" damping="1"/>
+      <geom name="lpad" type="capsule" fromto="0 0 -0.02 0 0 0.02" size="0.01"/>
+    </body>
+    <body name="rbase" pos="0.05 0 -0.06" gravcomp="1">
+      <joint name="r1" type="hinge" axis="0 1 0" damping="0.1"/>
+      <geom type="capsule" fromto="0 0 0 0 0 0.03" size="0.004" contype="0" conaffinity="0"/>
+      <body name="rtip" pos="0 0 0.03" gravcomp="1">
+        <joint name="r2" type="hinge" axis="0 1 0" damping="0.1"/>
+        <geom name="rpad" type="capsule" fromto="0 0 0.02 0 0 0.07" size="0.01"/>
+      </body>
+    </body>
+    <body name="object" pos="0 0 0">
+      <freejoint name="object"/>
+      OBJECT
+    </body>
+  </worldbody>
+  <equality>
+    <joint joint1="r2" joint2="r1" polycoef="0 0.5 0 0 0"/>
+  </equality>
+  <actuator>
+    <motor name="lm" joint="lslide"/>
+    <motor name="rm" joint="r1"/>
+  </actuator>
+</mujoco>
+"""
+BOX = (
+    '<geom name="obox" type="box" size="0.03 0.03 0.03" mass="0.1" contype="1" '
+    'conaffinity="0" friction="1"/>'
+)
+SPHERE = (
+    '<geom name="osph" type="sphere" size="0.035" mass="0.1" contype="1" '
+    'conaffinity="0" friction="1"/>'
+)
+
+
+def toy(obj: str = BOX) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    model = mujoco.MjModel.from_xml_string(TOY.replace("OBJECT", obj))
+    data = mujoco.MjData(model)
+    settle(model, data, [4.0, -0.3])
+    return model, data
+
+
+@pytest.fixture(scope="module", params=["box", "sphere"])
+def toy_grasp(request):
+    model, data = toy(BOX if request.param == "box" else SPHERE)
+    return model, data, grasp_from_mujoco(model, data)
+
+
+_SCENE_CACHE: dict[str, tuple] = {}
+
+
+@pytest.fixture(scope="module", params=SCENES)
+def scene(request):
+    name = request.param
+    if name not in _SCENE_CACHE:
+        model, data = load_scene(name)
+        _SCENE_CACHE[name] = (model, data, grasp_from_mujoco(model, data))
+    return _SCENE_CACHE[name]
+
+
+# -- finite differences through MuJoCo --------------------------------------------------
+def _material_points(model, data, body_ids, points_world, qpos):
+    """World positions, at configuration ``qpos``, of the points ``points_world``
+    (taken at ``data``'s configuration) carried along with bodies ``body_ids``."""
+    local = [
+        data.xmat[b].reshape(3, 3).T @ (p - data.xpos[b])
+        for b, p in zip(body_ids, points_world, strict=True)
+    ]
+    d2 = mujoco.MjData(model)
+    d2.qpos[:] = qpos
+    mujoco.mj_kinematics(model, d2)
+    return np.array(
+        [d2.xpos[b] + d2.xmat[b].reshape(3, 3) @ q for b, q in zip(body_ids, local, strict=True)]
+    )
+
+
+def _object_fd(model, data, g: SceneGrasp, r: np.ndarray) -> np.ndarray:
+    """Contact-point motion (stacked, contact frames) for object motion r = (v, w),
+    both in the object frame, by central differences of MuJoCo's kinematics."""
+    obj = model.body("object").id
+    jnt = model.body_jntadr[obj]
+    dof = model.jnt_dofadr[jnt]
+    qvel = np.zeros(model.nv)
+    qvel[dof : dof + 3] = g.object_mat @ r[:3]  # free joint: linear part in world
+    qvel[dof + 3 : dof + 6] = r[3:]  # angular part in the body frame
+    pts = g.points_world()
+    ids = [obj] * g.m
+    moved = []
+    for s in (+1.0, -1.0):
+        q = data.qpos.copy()
+        mujoco.mj_integratePos(model, q, qvel, s * EPS)
+        moved.append(_material_points(model, data, ids, pts, q))
+    disp = (moved[0] - moved[1]) / (2 * EPS)
+    return np.einsum("mkj,mj->mk", g.frames_world(), disp).reshape(-1)
+
+
+def _hand_fd(model, data, g: SceneGrasp, k: int) -> np.ndarray:
+    """Hand contact-point motion (stacked, contact frames) for unit speed of
+    independent hand coordinate k, by central differences of MuJoCo's kinematics."""
+    qvel = np.zeros(model.nv)
+    qvel[g.hand_dofs] = g.T[:, k]
+    pts = g.points_world()
+    moved = []
+    for s in (+1.0, -1.0):
+        q = data.qpos.copy()
+        mujoco.mj_integratePos(model, q, qvel, s * EPS)
+        moved.append(_material_points(model, data, list(g.hand_bodies), pts, q))
+    disp = (moved[0] - moved[1]) / (2 * EPS)
+    return np.einsum("mkj,mj->mk", g.frames_world(), disp).reshape(-1)
+
+
+def _check_kinematics(model, data, g: SceneGrasp, seed: int = 0) -> None:
+    rng = np.random.default_rng(seed)
+    for _ in range(4):
+        r = rng.normal(size=6)
+        pred = g.G.T @ r
+        fd = _object_fd(model, data, g, r)
+        assert np.linalg.norm(fd - pred) <= 1e-4 * np.linalg.norm(pred), (fd, pred)
+    for k in range(g.J.shape[1]):
+        pred = g.J[:, k]
+        fd = _hand_fd(model, data, g, k)
+        scale = max(np.linalg.norm(pred), np.linalg.norm(fd))
+        if scale == 0.0:
+            continue  # a joint that moves no contact (e.g. an unloaded finger)
+        assert np.linalg.norm(fd - pred) <= 1e-4 * scale, (k, g.joint_names[k], fd, pred)
+
+
+def _check_statics(g: SceneGrasp) -> None:
+    c = g.forces.reshape(-1)
+    load = np.abs(g.forces).max() + np.abs(g.gravity_wrench[:3]).max()
+    res = g.equilibrium_residuals()
+    # MuJoCo's soft constraints at rest leave residual accelerations of order
+    # vtol / timestep on the light bodies; 1e-3 of the load is far above that
+    # and far below any sign or frame error (which would be O(load)).
+    assert res["object"] <= 1e-3 * load, res
+    assert res["hand"] <= 1e-3 * load, res
+    # the same, written out: G c + w_g = 0 and J^T c = R f
+    assert np.allclose(g.G @ c, -g.gravity_wrench, atol=1e-3 * load)
+    assert np.allclose(g.J.T @ c, g.R @ g.commands, atol=1e-3 * load)
+
+
+def _check_frames(model, data, g: SceneGrasp) -> None:
+    F = g.frames
+    assert np.allclose(F @ F.transpose(0, 2, 1), np.eye(3), atol=1e-9)
+    assert np.all(np.linalg.det(F) > 0)
+    # convex object geoms: the inward normal points from the contact toward the geom centre
+    centre = data.geom_xpos[g.object_geoms]
+    n_world = g.frames_world()[:, 0]
+    inward = np.einsum("mj,mj->m", n_world, centre - g.points_world())
+    assert np.all(inward > 0), inward
+    # the hand pushes, never pulls
+    assert np.all(g.forces[:, 0] >= -1e-9), g.forces[:, 0]
+    # Coulomb: MuJoCo's forces lie in the (elliptic) friction cone
+    tang = np.linalg.norm(g.forces[:, 1:], axis=1)
+    assert np.all(tang <= g.mu * g.forces[:, 0] * (1 + 1e-6) + 1e-9)
+
+
+# -- the toy model: conventions on a case small enough to reason about ------------------
+def test_toy_kinematics(toy_grasp):
+    model, data, g = toy_grasp
+    _check_kinematics(model, data, g)
+
+
+def test_toy_statics(toy_grasp):
+    _, _, g = toy_grasp
+    _check_statics(g)
+    assert g.forces[:, 0].sum() > 1.0  # squeezed: the 4 N slide motor loads the box
+
+
+def test_toy_frames(toy_grasp):
+    model, data, g = toy_grasp
+    _check_frames(model, data, g)
+
+
+def test_toy_coupled_joints():
+    """r2 = 0.5 r1: two independent coordinates, T = [[1,0],[0,1],[0,0.5]], R = I."""
+    model, data = toy()
+    dofs, T, names = hand_coordinates(model, data)
+    assert names == ["lslide", "r1"]
+    assert np.array_equal(T, [[1, 0], [0, 1], [0, 0.5]])
+    g = grasp_from_mujoco(model, data)
+    assert np.array_equal(g.R, np.eye(2))
+    assert np.allclose(g.commands, [4.0, -0.3])
+
+
+def test_toy_object_geom_order():
+    """The sphere object is MuJoCo's geom1 against capsule pads (type order), the box
+    its geom2: both must give inward normals and pushing forces."""
+    for obj, first in ((SPHERE, True), (BOX, False)):
+        model, data = toy(obj)
+        g = grasp_from_mujoco(model, data)
+        for ids, geom in zip(g.contact_ids, g.object_geoms, strict=True):
+            assert bool(data.contact[ids[0]].geom1 == geom) is first
+        assert np.all(g.forces[:, 0] > 0)
+
+
+def test_nonlinear_coupling_refused():
+    xml = TOY.replace("OBJECT", BOX).replace('polycoef="0 0.5 0 0 0"', 'polycoef="0 0.5 0.1 0 0"')
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    with pytest.raises(GraspError, match="nonlinear"):
+        hand_coordinates(model, data)
+
+
+# -- the thesis scenes ------------------------------------------------------------------
+def test_scenes_exist():
+    expected = {
+        "barrett_box",
+        "barrett_box_3d",
+        "barrett_flask",
+        "barrett_cube",
+        "tendon_box",
+        "four_finger_sphere",
+        "four_finger_cylinder",
+        "four_finger_cube",
+    }
+    assert expected <= set(SCENES)
+
+
+def test_scene_kinematics(scene):
+    model, data, g = scene
+    _check_kinematics(model, data, g)
+
+
+def test_scene_statics(scene):
+    _, _, g = scene
+    _check_statics(g)
+
+
+def test_scene_frames(scene):
+    model, data, g = scene
+    _check_frames(model, data, g)
+
+
+def test_scene_at_rest_without_joint_limits(scene):
+    """At rest, and no joint limit takes load (else J^T c = R f would not hold)."""
+    model, data, _ = scene
+    assert np.abs(data.qvel).max() < 1e-3
+    limit = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
+    rows = np.flatnonzero(data.efc_type[: data.nefc] == limit)
+    assert np.allclose(data.efc_force[rows], 0.0, atol=1e-9)
+
+
+# -- bad input --------------------------------------------------------------------------
+def test_unknown_scene_lists_known():
+    with pytest.raises(SceneError, match="unknown scene 'no_such_scene'") as exc:
+        load_scene("no_such_scene")
+    for name in SCENES:
+        assert name in str(exc.value)
+
+
+def test_missing_object_body():
+    model, data = toy()
+    with pytest.raises(GraspError, match="no body named 'cup'.*object"):
+        grasp_from_mujoco(model, data, object_body="cup")
+
+
+def test_no_contacts():
+    model, data = toy()
+    jnt = model.joint("object").qposadr[0]
+    data.qpos[jnt + 2] += 1.0  # lift the box 1 m out of the hand
+    mujoco.mj_forward(model, data)
+    with pytest.raises(GraspError, match="no active contact"):
+        grasp_from_mujoco(model, data)
+
+
+def test_bad_preload():
+    name = SCENES[0] if SCENES else pytest.skip("no scenes yet")
+    model, _ = load_scene(name, settle_grasp=False)
+    with pytest.raises(SceneError, match=f"needs {model.nu} actuator forces"):
+        load_scene(name, preload=np.ones(model.nu + 1))
+    with pytest.raises(SceneError, match="NaN"):
+        load_scene(name, preload=np.full(model.nu, np.nan))
