@@ -6,6 +6,13 @@
 >>> grasp.equilibrium_residuals()                         # doctest: +SKIP
 """
 
+import os
+import sys
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    # MuJoCo picks its GL backend at import; without a display only EGL works offscreen
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
 from .contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates, transmission
 from .scenes import SceneError, SettleInfo, available_scenes, load_scene, scene_about, settle
 

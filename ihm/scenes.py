@@ -55,7 +55,7 @@ def scene_path(name: str) -> Path:
     """Path of scene ``name``; :class:`SceneError` listing the known scenes if unknown."""
     known = available_scenes()
     if name not in known:
-        raise SceneError(f"unknown scene {name!r}; known scenes: {', '.join(known)}")
+        raise SceneError(f"unknown scene {name!r}; known scenes: {', '.join(known) or '(none)'}")
     return SCENES_DIR / f"{name}.xml"
 
 

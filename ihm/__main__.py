@@ -1,0 +1,189 @@
+"""``python -m ihm``: list the thesis' grasp scenes, settle one and look at its contacts.
+
+Examples::
+
+    python -m ihm list
+    python -m ihm show barrett_box                      # table + barrett_box.png
+    python -m ihm show barrett_box --out box.png --rrd box.rrd
+    python -m ihm show barrett_box --preload 0.3 0.3 0.3 0
+
+Errors (unknown scene, wrong preload length, a grasp that does not settle,
+no OpenGL context) print one line to stderr and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Headless EGL unless the user chose a backend (osmesa, glfw). MuJoCo fixes its
+# GL backend when first imported, which `python -m ihm` does (ihm/__init__)
+# before this line runs; ihm.render reads MUJOCO_GL again when it creates the
+# context, so setting it here still takes effect.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from stability import GraspError  # noqa: E402
+
+from . import scenes  # noqa: E402
+from .contacts import SceneGrasp, grasp_from_mujoco  # noqa: E402
+
+PROG = "python -m ihm"
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Grasp scenes of the thesis on MuJoCo: list them, or settle one and "
+        "show its contacts and forces (table, PNG, rerun recording).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub.add_parser(
+        "list",
+        help="list the scenes in assets/scenes with their descriptions",
+        description="List the scenes in assets/scenes, one per line: name and ihm_about.",
+    )
+    show = sub.add_parser(
+        "show",
+        help="settle a scene's grasp; print its contacts; write a PNG (and .rrd)",
+        description="Load SCENE, close the hand with the commanded actuator forces until the "
+        "grasp is at rest, and print per contact the hand link, the point in the object frame "
+        "[mm], the normal and tangential force of the hand on the object [N] and the friction "
+        "coefficient, with the settle time and the equilibrium residuals. Writes a PNG with "
+        "contact points (yellow) and force arrows (red, from the point along the force of "
+        "the hand on the object), and optionally a rerun recording.",
+    )
+    show.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    show.add_argument(
+        "--out",
+        type=Path,
+        metavar="PATH.png",
+        help="PNG to write (default: SCENE.png in the current directory)",
+    )
+    show.add_argument(
+        "--rrd", type=Path, metavar="PATH.rrd", help="also write a rerun recording to this file"
+    )
+    show.add_argument(
+        "--preload",
+        type=float,
+        nargs="+",
+        metavar="F",
+        help="commanded actuator forces, one per actuator, in each actuator's unit "
+        "(N m for joint motors, N for tendons); default: the scene's ihm_preload",
+    )
+    show.add_argument("--width", type=int, default=640, help="image width [px] (default 640)")
+    show.add_argument("--height", type=int, default=480, help="image height [px] (default 480)")
+    show.add_argument(
+        "--force-scale",
+        type=float,
+        metavar="M_PER_N",
+        help="arrow length per newton [m/N] (default: largest force 0.8 object radii long)",
+    )
+    show.add_argument(
+        "--no-contacts",
+        action="store_true",
+        help="draw the scene without contact points and force arrows (same view)",
+    )
+    return parser
+
+
+def _cmd_list() -> int:
+    names = scenes.available_scenes()
+    if not names:
+        print(f"no scenes in {scenes.SCENES_DIR}")
+        return 0
+    width = max(len(n) for n in names)
+    for name in names:
+        try:
+            about = scenes.scene_about(name)
+        except ValueError as exc:  # a scene that does not compile still gets listed
+            about = f"(does not compile: {str(exc).splitlines()[0]})"
+        print(f"{name:<{width}}  {about}")
+    return 0
+
+
+def contact_table(model: mujoco.MjModel, grasp: SceneGrasp) -> str:
+    """Per contact: hand link, point in the object frame [mm], c_n [N], |c_t| [N], mu."""
+    links = [model.body(int(b)).name or f"body {b}" for b in grasp.hand_bodies]
+    w = max(9, *(len(s) for s in links))
+    head = f"{'#':>2}  {'hand link':<{w}}  {'x, y, z in object frame [mm]':>28}  "
+    head += f"{'c_n [N]':>8}  {'|c_t| [N]':>9}  {'mu':>5}  {'|c_t|/c_n':>9}"
+    rows = [head, "-" * len(head)]
+    for k, (link, p, c, mu) in enumerate(
+        zip(links, grasp.points, grasp.forces, grasp.mu, strict=True)
+    ):
+        ct = float(np.hypot(c[1], c[2]))
+        ratio = f"{ct / c[0]:9.3f}" if c[0] > 1e-9 else f"{'-':>9}"
+        xyz = ", ".join(f"{1e3 * v:7.2f}" for v in p)
+        rows.append(f"{k:>2}  {link:<{w}}  {xyz:>28}  {c[0]:8.3f}  {ct:9.3f}  {mu:5.2f}  {ratio}")
+    return "\n".join(rows)
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from .render import render_png  # after MUJOCO_GL is set (it is, at the top)
+
+    model, data = scenes.load_scene(args.scene, preload=args.preload)
+    info = scenes.last_settle
+    grasp = grasp_from_mujoco(model, data)
+    print(f"scene {args.scene}: {scenes.scene_about(args.scene)}")
+    if info is not None:
+        print(
+            f"settled in {info.time_s:.3f} s simulated ({info.wall_s:.2f} s wall, {info.steps} "
+            f"steps, {info.rounds} round(s)), max |qvel| = {info.max_vel:.2g}"
+        )
+    cmd = ", ".join(
+        f"{n} = {f:.4g}" for n, f in zip(grasp.actuator_names, grasp.commands, strict=True)
+    )
+    print(f"actuator forces: {cmd}")
+    print(f"{grasp.m} contacts (forces of the hand on the object):")
+    print(contact_table(model, grasp))
+    res = grasp.equilibrium_residuals()
+    print(
+        f"equilibrium residuals: object max|G c + w_g| = {res['object']:.3g} [N, N m], "
+        f"hand max|J^T c - R f| = {res['hand']:.3g} [N m]"
+    )
+    out = args.out if args.out is not None else Path(f"{args.scene}.png")
+    png = render_png(
+        model,
+        data,
+        grasp,
+        out,
+        width=args.width,
+        height=args.height,
+        force_scale=args.force_scale,
+        contacts=not args.no_contacts,
+    )
+    print(f"wrote {png}")
+    if args.rrd is not None:
+        from .rerun_log import log_scene
+
+        rrd = log_scene(model, data, grasp, args.rrd, force_scale=args.force_scale)
+        print(f"wrote {rrd}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit status (2 on a user-facing error)."""
+    from .render import RenderError
+
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command == "list":
+        return _cmd_list()
+    if args.width < 1 or args.height < 1:
+        parser.error(f"--width and --height must be positive, got {args.width} x {args.height}")
+    try:
+        return _cmd_show(args)
+    except (GraspError, RenderError, OSError) as exc:  # SceneError is a GraspError
+        print(f"{PROG} show: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
