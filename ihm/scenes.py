@@ -103,6 +103,11 @@ class SettleInfo:
     max_vel : largest ``|qvel|`` at the end [m/s or rad/s]
     commands : actuator forces commanded [actuator units]
     rounds : setpoint rounds (position actuators only; 1 otherwise)
+    force_error : ``max |actuator_force - commands|`` at rest [actuator units];
+        0 for motors. For servos it stays nonzero when the rounds run out:
+        fixed joint torques cannot balance a fully actuated fingertip grasp
+        (the thesis' argument for position control), so the servo springs
+        carry the object's weight share.
     """
 
     time_s: float
@@ -111,6 +116,7 @@ class SettleInfo:
     max_vel: float
     commands: NDArray[np.float64]
     rounds: int = 1
+    force_error: float = 0.0
     contacts: int = 0
     extras: dict = field(default_factory=dict)
 
@@ -178,7 +184,9 @@ def settle(
     3. Position-servo actuators (``force = kp (ctrl - length)``, the four-finger
        hand's series-elastic joints) are driven to the commanded *force*: each
        round sets ``ctrl = length + f_c / kp`` and repeats step 2, until
-       ``|actuator_force - f_c| <= ftol (1 + |f_c|)`` or ``rounds`` rounds.
+       ``|actuator_force - f_c| <= ftol (1 + |f_c|)`` or ``rounds`` rounds
+       (the state after the last round is returned, at rest; the remaining
+       force error is reported in :attr:`SettleInfo.force_error`).
        Motors (``force = ctrl``) get ``ctrl = f_c`` once.
 
     Raises :class:`SceneError` if the grasp is not at rest after ``max_s``
@@ -228,8 +236,8 @@ def settle(
         if not servo.any():
             break
         err = np.abs(data.actuator_force - f_c)
-        if np.all(err <= ftol * (1 + np.abs(f_c))):
-            break
+        if np.all(err <= ftol * (1 + np.abs(f_c))) or done_rounds == rounds:
+            break  # converged, or out of rounds: keep the state at rest
         set_ctrl()
     mujoco.mj_forward(model, data)
     return SettleInfo(
@@ -239,6 +247,7 @@ def settle(
         max_vel=vmax,
         commands=f_c,
         rounds=done_rounds,
+        force_error=float(np.abs(data.actuator_force - f_c).max()) if model.nu else 0.0,
         contacts=int(data.ncon),
     )
 
