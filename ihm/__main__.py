@@ -21,7 +21,8 @@ import os
 # context, so setting it here still takes effect.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import argparse  # noqa: E402
+import argparse
+import math  # noqa: E402
 import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -178,6 +179,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _cmd_list()
     if args.width < 1 or args.height < 1:
         parser.error(f"--width and --height must be positive, got {args.width} x {args.height}")
+    force_scale = getattr(args, "force_scale", None)
+    if force_scale is not None and not (math.isfinite(force_scale) and force_scale >= 0):
+        parser.error(f"--force-scale must be a finite number >= 0 [m/N], got {force_scale}")
     try:
         return _cmd_show(args)
     except (GraspError, RenderError, OSError) as exc:  # SceneError is a GraspError

@@ -232,12 +232,15 @@ def grasp_from_mujoco(
     One contact per active MuJoCo contact between the object's subtree and any
     other body (the hand; a static body counts as a fixed finger with zero
     Jacobian rows), duplicates merged (see the module docstring). Friction is
-    MuJoCo's sliding friction of the contact (``contact.friction[0]``).
+    MuJoCo's sliding friction of the contact (``contact.friction[0]``; 0 for a
+    frictionless ``condim=1`` contact; ``condim`` 4 or 6, with torsional or
+    rolling friction, is refused).
 
     Raises
     ------
     GraspError
-        No body ``object_body``; no active contact between it and the hand;
+        No body ``object_body``; no active contact between it and the hand; a
+        contact with torsional/rolling friction (condim > 3);
         a hand joint that is not a hinge or slide; a nonlinear joint coupling.
     """
     obj = _body_id(model, object_body)
@@ -254,6 +257,12 @@ def grasp_from_mujoco(
         b1, b2 = model.geom_bodyid[con.geom1], model.geom_bodyid[con.geom2]
         if in_obj[b1] == in_obj[b2]:
             continue  # not between object and hand
+        if con.dim > 3:
+            raise GraspError(
+                f"contact {i} ({model.geom(con.geom1).name or con.geom1} / "
+                f"{model.geom(con.geom2).name or con.geom2}) has condim {con.dim}: torsional or "
+                "rolling friction is not in the point-contact model; use condim 1 or 3"
+            )
         obj_first = bool(in_obj[b1])
         frame, force = _contact_frame_force(model, data, i, obj_first)
         hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
@@ -275,7 +284,7 @@ def grasp_from_mujoco(
                     "pos": [pos],
                     "frame": frame,
                     "force_world": frame.T @ force,
-                    "mu": float(con.friction[0]),
+                    "mu": 0.0 if con.dim == 1 else float(con.friction[0]),
                     "ids": [i],
                 }
             )

@@ -252,6 +252,8 @@ def _contact_sizes(
     """(force scale [m/N], point radius [m], arrow width [m]) after the object's size."""
     on_obj = model.geom_bodyid == obj
     radius = float(model.geom_rbound[on_obj].max()) if obj >= 0 and on_obj.any() else 0.05
+    if force_scale is not None and not (np.isfinite(force_scale) and force_scale >= 0):
+        raise ValueError(f"force_scale must be a finite number >= 0 [m/N], got {force_scale!r}")
     if force_scale is None:
         fmax = float(np.linalg.norm(grasp.forces_world(), axis=1).max())
         force_scale = 0.8 * radius / fmax if fmax > 1e-9 else 0.0

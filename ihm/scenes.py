@@ -121,6 +121,13 @@ class SettleInfo:
     extras: dict = field(default_factory=dict)
 
 
+def _as_forces(value: ArrayLike, nu: int) -> NDArray[np.float64]:
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"actuator forces must be {nu} numbers, got {value!r}") from exc
+
+
 def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
     """``kp`` of position-servo actuators (force = kp (ctrl - length)), 0 for others.
 
@@ -194,7 +201,14 @@ def settle(
     """
     import time
 
-    f_c = np.asarray(commands, dtype=float).reshape(-1)
+    for key, value in (("vtol", vtol), ("hold_s", hold_s), ("grip_s", grip_s), ("max_s", max_s)):
+        if not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+            raise SceneError(f"{key} must be a finite number >= 0, got {value!r}")
+    if vtol <= 0 or max_s <= 0:
+        raise SceneError(f"vtol and max_s must be > 0, got vtol={vtol!r}, max_s={max_s!r}")
+    if not isinstance(rounds, (int, np.integer)) or rounds < 1:
+        raise SceneError(f"rounds must be an integer >= 1, got {rounds!r}")
+    f_c = _as_forces(commands, model.nu).reshape(-1)
     if f_c.shape != (model.nu,):
         raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
     if not np.all(np.isfinite(f_c)):
@@ -286,7 +300,7 @@ def load_scene(
     if key < 0:
         raise SceneError(f"scene {name!r} has no keyframe named 'init'")
     mujoco.mj_resetDataKeyframe(model, data, key)
-    f_c = default_preload(model) if preload is None else np.asarray(preload, dtype=float)
+    f_c = default_preload(model) if preload is None else _as_forces(preload, model.nu)
     if f_c.shape != (model.nu,):
         raise SceneError(
             f"preload for scene {name!r} needs {model.nu} actuator forces "

@@ -148,6 +148,18 @@ def test_render_png_bad_camera(toy, tmp_path: Path) -> None:
         render_png(model, data, grasp, tmp_path / "x.png", camera="nope")
 
 
+def test_bad_force_scale(toy, tmp_path: Path) -> None:
+    model, data, grasp = toy
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="force_scale"):
+            render_png(model, data, grasp, tmp_path / "x.png", force_scale=bad)
+        with pytest.raises(ValueError, match="force_scale"):
+            log_scene(model, data, grasp, tmp_path / "x.rrd", force_scale=bad)
+        with pytest.raises(SystemExit) as exc:
+            main(["show", "toy", "--force-scale", str(bad)])
+        assert exc.value.code == 2
+
+
 def test_log_scene_writes_rrd(toy, tmp_path: Path) -> None:
     model, data, grasp = toy
     path = log_scene(model, data, grasp, tmp_path / "sub" / "toy.rrd")

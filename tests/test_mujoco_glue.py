@@ -309,3 +309,34 @@ def test_bad_preload():
         load_scene(name, preload=np.ones(model.nu + 1))
     with pytest.raises(SceneError, match="NaN"):
         load_scene(name, preload=np.full(model.nu, np.nan))
+
+
+def test_bad_settle_arguments():
+    model = mujoco.MjModel.from_xml_string(TOY.replace("OBJECT", BOX))
+    data = mujoco.MjData(model)
+    with pytest.raises(SceneError, match="rounds"):
+        settle(model, data, [4.0, -0.3], rounds=0)
+    with pytest.raises(SceneError, match="vtol"):
+        settle(model, data, [4.0, -0.3], vtol="x")
+    with pytest.raises(SceneError, match="actuator forces must be 2 numbers"):
+        settle(model, data, ["a", "b"])
+    name = SCENES[0]
+    with pytest.raises(SceneError, match="actuator forces must be"):
+        load_scene(name, preload="abc")
+    with pytest.raises(SceneError, match="actuator forces must be"):
+        load_scene(name, preload={"x": 1})
+
+
+def test_condim():
+    """condim 1 is frictionless (mu = 0 whatever the geoms' friction); torsional or
+    rolling friction (condim 4, 6) is not in the point-contact model and is refused."""
+    model, data = toy()
+    g3 = grasp_from_mujoco(model, data)
+    assert np.all(g3.mu == 1.0)
+    for dim in range(data.ncon):
+        data.contact.dim[dim] = 1
+    g1 = grasp_from_mujoco(model, data)
+    assert np.all(g1.mu == 0.0) and g1.m == g3.m
+    data.contact.dim[0] = 4
+    with pytest.raises(GraspError, match="condim 4"):
+        grasp_from_mujoco(model, data)
