@@ -16,6 +16,7 @@ import matplotlib.image
 import mujoco
 import numpy as np
 import pytest
+from conftest import THESIS_SCENES
 
 import ihm
 from ihm import scenes
@@ -24,16 +25,7 @@ from ihm.render import ARROW_RGBA, RenderError, render_png
 from ihm.rerun_log import log_scene
 
 ROOT = Path(__file__).resolve().parent.parent
-PREFERRED = [
-    "barrett_box",
-    "barrett_box_3d",
-    "barrett_flask",
-    "barrett_cube",
-    "tendon_box",
-    "four_finger_sphere",
-    "four_finger_cylinder",
-    "four_finger_cube",
-]
+PREFERRED = THESIS_SCENES
 
 # Two fingers squeeze a box: a slide finger and a hinge finger, motors, no lights
 # (the renderer brightens the headlight). A complete scene file: object, keyframe

@@ -12,6 +12,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from conftest import THESIS_SCENES
 
 import ihm
 from ihm.contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates
@@ -77,22 +78,32 @@ def toy(obj: str = BOX) -> tuple[mujoco.MjModel, mujoco.MjData]:
     return model, data
 
 
-@pytest.fixture(scope="module", params=["box", "sphere"])
+_CACHE: dict[str, tuple] = {}
+TOYS = {"toy-box": BOX, "toy-sphere": SPHERE}
+
+
+def _settled(name: str) -> tuple:
+    """(model, data, grasp) of a toy variant or a thesis scene, settled once per session."""
+    if name not in _CACHE:
+        model, data = toy(TOYS[name]) if name in TOYS else load_scene(name)
+        _CACHE[name] = (model, data, grasp_from_mujoco(model, data))
+    return _CACHE[name]
+
+
+@pytest.fixture(scope="module", params=list(TOYS))
 def toy_grasp(request):
-    model, data = toy(BOX if request.param == "box" else SPHERE)
-    return model, data, grasp_from_mujoco(model, data)
+    return _settled(request.param)
 
 
-_SCENE_CACHE: dict[str, tuple] = {}
+@pytest.fixture(scope="module", params=[*TOYS, *SCENES])
+def case(request):
+    """The toy hand (a case small enough to reason about) and every thesis scene."""
+    return _settled(request.param)
 
 
 @pytest.fixture(scope="module", params=SCENES)
 def scene(request):
-    name = request.param
-    if name not in _SCENE_CACHE:
-        model, data = load_scene(name)
-        _SCENE_CACHE[name] = (model, data, grasp_from_mujoco(model, data))
-    return _SCENE_CACHE[name]
+    return _settled(request.param)
 
 
 # -- finite differences through MuJoCo --------------------------------------------------
@@ -192,21 +203,25 @@ def _check_frames(model, data, g: SceneGrasp) -> None:
     assert np.all(tang <= g.mu * g.forces[:, 0] * (1 + 1e-6) + 1e-9)
 
 
-# -- the toy model: conventions on a case small enough to reason about ------------------
-def test_toy_kinematics(toy_grasp):
-    model, data, g = toy_grasp
+# -- conventions, on the toy hand and every scene ----------------------------------------
+def test_kinematics(case):
+    model, data, g = case
     _check_kinematics(model, data, g)
 
 
-def test_toy_statics(toy_grasp):
-    _, _, g = toy_grasp
+def test_statics(case):
+    _, _, g = case
     _check_statics(g)
-    assert g.forces[:, 0].sum() > 1.0  # squeezed: the 4 N slide motor loads the box
 
 
-def test_toy_frames(toy_grasp):
-    model, data, g = toy_grasp
+def test_frames(case):
+    model, data, g = case
     _check_frames(model, data, g)
+
+
+def test_toy_squeezed(toy_grasp):
+    _, _, g = toy_grasp
+    assert g.forces[:, 0].sum() > 1.0  # the 4 N slide motor loads the box
 
 
 def test_toy_coupled_joints():
@@ -242,32 +257,7 @@ def test_nonlinear_coupling_refused():
 
 # -- the thesis scenes ------------------------------------------------------------------
 def test_scenes_exist():
-    expected = {
-        "barrett_box",
-        "barrett_box_3d",
-        "barrett_flask",
-        "barrett_cube",
-        "tendon_box",
-        "four_finger_sphere",
-        "four_finger_cylinder",
-        "four_finger_cube",
-    }
-    assert expected <= set(SCENES)
-
-
-def test_scene_kinematics(scene):
-    model, data, g = scene
-    _check_kinematics(model, data, g)
-
-
-def test_scene_statics(scene):
-    _, _, g = scene
-    _check_statics(g)
-
-
-def test_scene_frames(scene):
-    model, data, g = scene
-    _check_frames(model, data, g)
+    assert set(THESIS_SCENES) <= set(SCENES)
 
 
 def test_scene_at_rest_without_joint_limits(scene):
