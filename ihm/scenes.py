@@ -19,7 +19,7 @@ the model is below ``vtol`` for ``hold_s`` seconds of simulated time.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -108,6 +108,7 @@ class SettleInfo:
         fixed joint torques cannot balance a fully actuated fingertip grasp
         (the thesis' argument for position control), so the servo springs
         carry the object's weight share.
+    contacts : MuJoCo contacts at rest (``data.ncon``)
     """
 
     time_s: float
@@ -118,7 +119,6 @@ class SettleInfo:
     rounds: int = 1
     force_error: float = 0.0
     contacts: int = 0
-    extras: dict = field(default_factory=dict)
 
 
 def _as_forces(value: ArrayLike, nu: int) -> NDArray[np.float64]:
