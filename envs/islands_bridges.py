@@ -1,0 +1,419 @@
+"""Islands and bridges: a 2D navigation task whose safe region is a union of convex pieces.
+
+Thesis section "Islands and Bridges" (chapter 7): the state is a position on a plane
+made of islands (discs or boxes) joined by narrow bridges (boxes); stepping off the
+union of these pieces is a failure, like dropping a grasped object. The environment
+exposes its one-step prediction and the signed distance ``M(s)`` to the edge of the safe
+region, so that shields (``shields.SimpleShield``, ``shields.SmartShield``) can correct
+unsafe actions before they are executed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from envs.geometry import Box, Disc, Piece, signed_distance
+
+__all__ = ["DEFAULT_BRIDGES", "DEFAULT_ISLANDS", "IslandsBridges", "draw_map"]
+
+#: The default map's islands, in map units (the plane spans about [0.1, 1.9] x [0.1, 1.85]).
+#: I0 south-west disc, I1 south-east box, I2 north-east disc, I3 north-west box, I4 central
+#: disc.
+DEFAULT_ISLANDS: tuple[Piece, ...] = (
+    Disc(center=(0.4, 0.4), radius=0.3),
+    Box(lo=(1.3, 0.15), hi=(1.9, 0.65)),
+    Disc(center=(1.6, 1.55), radius=0.3),
+    Box(lo=(0.1, 1.2), hi=(0.7, 1.8)),
+    Disc(center=(1.0, 1.0), radius=0.2),
+)
+
+#: The default map's bridges, all 0.1 wide: B0 I0-I1, B1 I1-I2, B2 I0-I3, B3 I3-I2 form a
+#: ring; B4 leaves B0 at a T-junction and leads north to the central island I4.
+DEFAULT_BRIDGES: tuple[Piece, ...] = (
+    Box(lo=(0.6, 0.35), hi=(1.35, 0.45)),
+    Box(lo=(1.55, 0.6), hi=(1.65, 1.3)),
+    Box(lo=(0.35, 0.65), hi=(0.45, 1.25)),
+    Box(lo=(0.65, 1.5), hi=(1.35, 1.6)),
+    Box(lo=(0.95, 0.35), hi=(1.05, 0.85)),
+)
+
+# Colours of the rgb_array rendering (thesis figure: red = current state, blue = goal).
+_SEA = np.array([205, 222, 235], dtype=np.uint8)
+_LAND = np.array([236, 216, 165], dtype=np.uint8)
+_SHORE = np.array([90, 80, 60], dtype=np.uint8)
+_GOAL = np.array([30, 80, 220], dtype=np.uint8)
+_AGENT = np.array([220, 30, 30], dtype=np.uint8)
+
+
+def _area(piece: Piece) -> float:
+    if isinstance(piece, Disc):
+        return math.pi * piece.radius**2
+    lo, hi = piece.bounds()
+    return float(np.prod(hi - lo))
+
+
+def _check_pieces(name: str, pieces: Sequence[Piece]) -> tuple[Piece, ...]:
+    pieces = tuple(pieces)
+    for p in pieces:
+        if not isinstance(p, Disc | Box):
+            raise TypeError(f"{name} must hold envs.Disc or envs.Box pieces, got {p!r}")
+    return pieces
+
+
+class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Walk from a start to a goal on islands joined by narrow bridges without falling off.
+
+    The safe region is the union of ``islands`` and ``bridges`` (convex ``Disc`` and
+    ``Box`` pieces of ``envs.geometry``). Its signed distance ``M(s)`` (positive inside,
+    ``safe_distance``) decides failure. Start and goal are drawn on the islands.
+
+    ## Action Space
+
+    ``Box(-1, 1, (2,), float32)``: a step; the position moves by ``max_step * clip(a, -1, 1)``.
+
+    | Num | Action                  | Min | Max | Unit                    |
+    |-----|-------------------------|-----|-----|-------------------------|
+    | 0   | step along x, ``dx``    | -1  | 1   | ``max_step`` map units  |
+    | 1   | step along y, ``dy``    | -1  | 1   | ``max_step`` map units  |
+
+    The dynamics are exact and known: ``predict(s, a) = s + action_scale * clip(a, -1, 1)``
+    with ``action_scale = max_step``.
+
+    ## Observation Space
+
+    ``Box(float32, (4,))``, bounded by the map's bounding box grown by ``max_step`` (the
+    farthest a step can leave the map):
+
+    | Num | Observation          | Unit      |
+    |-----|----------------------|-----------|
+    | 0   | agent ``x``          | map units |
+    | 1   | agent ``y``          | map units |
+    | 2   | goal ``x_goal``      | map units |
+    | 3   | goal ``y_goal``      | map units |
+
+    ## Starting State
+
+    The goal, then the start, are drawn area-uniformly on the islands (an island is picked
+    with probability proportional to its area, then a point uniformly in it); by default
+    (``different_islands=True``) on different islands, and never within ``goal_eps`` of each
+    other. ``reset(options={"start": (x, y), "goal": (x, y)})`` sets either explicitly (each
+    must lie in the safe region).
+
+    ## Rewards
+
+    With ``d = ||s_{t+1} - goal||``:
+
+    - ``reward="dense"``: ``-d``.
+    - ``reward="sparse"``: ``1.0`` on success (``d <= goal_eps`` and the new state safe),
+      else ``0.0``.
+
+    There is no failure penalty: the episode ends and no more reward can be collected.
+    ``info["reward_goal"]`` carries the (only) reward term; the reward equals it.
+
+    ## Episode End
+
+    - Termination (failure): ``M(s_{t+1}) < 0``, the agent stepped off the safe region
+      (``info["failure"]``).
+    - Termination (success): ``d <= goal_eps`` with ``M(s_{t+1}) >= 0``
+      (``info["is_success"]``).
+    - Truncation: 200 steps, by the ``TimeLimit`` of ``gym.make("ihm/IslandsBridges-v0")``.
+
+    Every step's ``info`` has ``is_success``, ``failure``, ``distance_to_edge`` (``M(s_{t+1})``),
+    ``distance_to_goal`` (``d``) and ``reward_goal``; reset's ``info`` has ``distance_to_edge``,
+    ``distance_to_goal``, ``start_island`` and ``goal_island`` (indices into ``islands``).
+
+    ## Arguments
+
+    - ``reward``: ``"dense"`` (default) or ``"sparse"``.
+    - ``max_step``: step length per unit action component (default 0.1 map units), > 0.
+    - ``goal_eps``: radius of the goal region (default 0.1), > 0.
+    - ``islands``: sequence of ``Disc``/``Box``; ``None`` is the default map's
+      ``DEFAULT_ISLANDS``.
+    - ``bridges``: sequence of ``Disc``/``Box``; ``None`` is ``DEFAULT_BRIDGES`` when
+      ``islands`` is ``None`` as well, else no bridges.
+    - ``different_islands``: draw start and goal on different islands (default ``True``;
+      needs at least two islands).
+    - ``render_mode``: ``None`` or ``"rgb_array"`` (a top view, red agent, blue goal).
+
+    ## Default Map
+
+    Five islands and five bridges 0.1 wide (see ``DEFAULT_ISLANDS``, ``DEFAULT_BRIDGES``
+    and ``docs/islands_map.png``): I0 ``Disc((0.4, 0.4), 0.3)``, I1 ``Box((1.3, 0.15),
+    (1.9, 0.65))``, I2 ``Disc((1.6, 1.55), 0.3)``, I3 ``Box((0.1, 1.2), (0.7, 1.8))``,
+    I4 ``Disc((1.0, 1.0), 0.2)``; bridges B0 ``Box((0.6, 0.35), (1.35, 0.45))`` (I0-I1),
+    B1 ``Box((1.55, 0.6), (1.65, 1.3))`` (I1-I2), B2 ``Box((0.35, 0.65), (0.45, 1.25))``
+    (I0-I3), B3 ``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2), B4 ``Box((0.95, 0.35),
+    (1.05, 0.85))`` (from B0 to I4).
+
+    ## Version History
+
+    - v0: initial version (thesis chapter 7).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        reward: str = "dense",
+        max_step: float = 0.1,
+        goal_eps: float = 0.1,
+        islands: Sequence[Piece] | None = None,
+        bridges: Sequence[Piece] | None = None,
+        different_islands: bool = True,
+        render_mode: str | None = None,
+    ) -> None:
+        if reward not in ("dense", "sparse"):
+            raise ValueError(f"reward must be 'dense' or 'sparse', got {reward!r}")
+        if not (math.isfinite(max_step) and max_step > 0):
+            raise ValueError(f"max_step must be finite and > 0, got {max_step!r}")
+        if not (math.isfinite(goal_eps) and goal_eps > 0):
+            raise ValueError(f"goal_eps must be finite and > 0, got {goal_eps!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, "
+                f"got {render_mode!r}"
+            )
+        if islands is None:
+            islands = DEFAULT_ISLANDS
+            bridges = DEFAULT_BRIDGES if bridges is None else bridges
+        self.islands = _check_pieces("islands", islands)
+        self.bridges = _check_pieces("bridges", () if bridges is None else bridges)
+        if not self.islands:
+            raise ValueError("the map is empty: islands must hold at least one Disc or Box")
+        if different_islands and len(self.islands) < 2:
+            raise ValueError(
+                "different_islands=True needs at least two islands, "
+                f"got {len(self.islands)}; pass different_islands=False"
+            )
+
+        self.reward_mode = reward
+        self.max_step = float(max_step)
+        self.goal_eps = float(goal_eps)
+        self.different_islands = bool(different_islands)
+        self.render_mode = render_mode
+
+        #: The safe region's convex pieces (islands, then bridges), used by the smart shield.
+        self.safe_pieces: tuple[Piece, ...] = self.islands + self.bridges
+        #: ``predict(s, a) = s + action_scale * clip(a, -1, 1)``.
+        self.action_scale = self.max_step
+        areas = np.array([_area(p) for p in self.islands])
+        self._island_p = areas / areas.sum()
+
+        lo = np.min([p.bounds()[0] for p in self.safe_pieces], axis=0)
+        hi = np.max([p.bounds()[1] for p in self.safe_pieces], axis=0)
+        #: The map's bounding box ``(lo, hi)``.
+        self.map_bounds = (lo, hi)
+        obs_lo = np.concatenate([lo - self.max_step, lo]).astype(np.float32)
+        obs_hi = np.concatenate([hi + self.max_step, hi]).astype(np.float32)
+        self.observation_space = spaces.Box(obs_lo, obs_hi, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+
+        #: Current position (2,), float64; set by ``reset``.
+        self.state = np.zeros(2)
+        #: Goal position (2,), float64; set by ``reset``.
+        self.goal = np.zeros(2)
+        self._has_reset = False
+        self._background: NDArray[np.uint8] | None = None
+
+    # ---- model used by the shields ----------------------------------------------------
+
+    def predict(self, state: ArrayLike, action: ArrayLike) -> NDArray[np.float64]:
+        """Next state after ``action`` from ``state``: ``state + action_scale * clip(a, -1, 1)``."""
+        a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+        return np.asarray(state, dtype=float) + self.action_scale * a
+
+    def safe_distance(self, state: ArrayLike) -> float:
+        """Thesis ``M(s)``: signed distance to the edge of the safe region, >= 0 is safe."""
+        return float(signed_distance(self.safe_pieces, np.asarray(state, dtype=float)))
+
+    # ---- Gymnasium API ----------------------------------------------------------------
+
+    def _sample_on_island(self, i: int) -> NDArray[np.float64]:
+        piece = self.islands[i]
+        rng = self.np_random
+        if isinstance(piece, Disc):
+            r = piece.radius * math.sqrt(rng.random())
+            t = 2.0 * math.pi * rng.random()
+            return np.asarray(piece.center, dtype=float) + r * np.array([math.cos(t), math.sin(t)])
+        lo, hi = piece.bounds()
+        return lo + rng.random(2) * (hi - lo)
+
+    def _sample_point(self, exclude: int | None = None) -> tuple[int, NDArray[np.float64]]:
+        p = self._island_p
+        if exclude is not None:
+            p = p.copy()
+            p[exclude] = 0.0
+            p /= p.sum()
+        for _ in range(1000):
+            i = int(self.np_random.choice(len(self.islands), p=p))
+            x = self._sample_on_island(i)
+            if self.safe_distance(x) >= 0:  # guards round-off on a disc's rim
+                return i, x
+        raise RuntimeError("could not sample a point in the safe region")  # pragma: no cover
+
+    def _island_of(self, x: NDArray[np.float64]) -> int:
+        """Index of the island that contains ``x`` (deepest), -1 if on no island."""
+        depth = [float(p.signed_distance(x)) for p in self.islands]
+        i = int(np.argmax(depth))
+        return i if depth[i] >= 0 else -1
+
+    def _given_point(self, options: dict[str, Any], key: str) -> NDArray[np.float64] | None:
+        if key not in options or options[key] is None:
+            return None
+        x = np.asarray(options[key], dtype=float)
+        if x.shape != (2,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"options[{key!r}] must be a finite (x, y), got {options[key]!r}")
+        if self.safe_distance(x) < 0:
+            raise ValueError(f"options[{key!r}] = {x.tolist()} is outside the safe region")
+        return x
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        start = self._given_point(options, "start")
+        goal = self._given_point(options, "goal")
+        if goal is None:
+            _, goal = self._sample_point()
+        goal_island = self._island_of(goal)
+        if start is None:
+            exclude = goal_island if self.different_islands and goal_island >= 0 else None
+            for _ in range(1000):
+                _, start = self._sample_point(exclude)
+                if np.linalg.norm(start - goal) > self.goal_eps:
+                    break
+            else:  # pragma: no cover - only on maps with tiny islands
+                raise RuntimeError("could not sample a start farther than goal_eps from the goal")
+        self.state = np.array(start, dtype=float)
+        self.goal = np.array(goal, dtype=float)
+        self._has_reset = True
+        info = {
+            "distance_to_edge": self.safe_distance(self.state),
+            "distance_to_goal": float(np.linalg.norm(self.state - self.goal)),
+            "start_island": self._island_of(self.state),
+            "goal_island": goal_island,
+        }
+        return self._obs(), info
+
+    def step(
+        self, action: ArrayLike
+    ) -> tuple[NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
+        if not self._has_reset:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=float)
+        if a.shape != (2,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be a finite array of shape (2,), got {action!r}")
+        self.state = self.predict(self.state, a)
+        edge = self.safe_distance(self.state)
+        dist = float(np.linalg.norm(self.state - self.goal))
+        failure = edge < 0
+        success = (not failure) and dist <= self.goal_eps
+        if self.reward_mode == "dense":
+            reward = -dist
+        else:
+            reward = 1.0 if success else 0.0
+        info = {
+            "is_success": success,
+            "failure": failure,
+            "distance_to_edge": edge,
+            "distance_to_goal": dist,
+            "reward_goal": reward,
+        }
+        return self._obs(), reward, failure or success, False, info
+
+    def _obs(self) -> NDArray[np.float32]:
+        return np.concatenate([self.state, self.goal]).astype(np.float32)
+
+    # ---- rendering --------------------------------------------------------------------
+
+    def _frame(self, px_per_unit: float = 200.0, margin: float = 0.1) -> tuple[Any, ...]:
+        lo, hi = self.map_bounds
+        lo, hi = lo - margin, hi + margin
+        w, h = (int(math.ceil(v)) for v in (hi - lo) * px_per_unit)
+        return lo, hi, w, h, px_per_unit
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """Top view as an ``(H, W, 3)`` uint8 image: land, shore line, goal disc, agent."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'")
+            return None
+        lo, hi, w, h, ppu = self._frame()
+        xs = lo[0] + (np.arange(w) + 0.5) / ppu
+        ys = hi[1] - (np.arange(h) + 0.5) / ppu  # row 0 is the top (largest y)
+        grid = np.stack(np.meshgrid(xs, ys), axis=-1)
+        if self._background is None:
+            m = signed_distance(self.safe_pieces, grid)
+            img = np.where((m >= 0)[..., None], _LAND, _SEA).astype(np.uint8)
+            img[np.abs(m) <= 1.0 / ppu] = _SHORE
+            self._background = img
+        img = self._background.copy()
+        goal_r = max(self.goal_eps, 3.0 / ppu)
+        img[np.linalg.norm(grid - self.goal, axis=-1) <= goal_r] = _GOAL
+        img[np.linalg.norm(grid - self.state, axis=-1) <= 6.0 / ppu] = _AGENT
+        return img
+
+
+def draw_map(
+    path: str | Path,
+    islands: Sequence[Piece] | None = None,
+    bridges: Sequence[Piece] | None = None,
+    start: ArrayLike | None = (0.35, 0.3),
+    goal: ArrayLike | None = (1.65, 1.65),
+) -> Path:
+    """Draw a map (default: the default map) with labelled pieces to a PNG at ``path``.
+
+    ``start`` (red) and ``goal`` (blue) mark an example task; ``None`` leaves them out.
+    Returns the path written. Used for ``docs/islands_map.png``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Rectangle
+
+    env = IslandsBridges(islands=islands, bridges=bridges, different_islands=False)
+    fig, ax = plt.subplots(figsize=(5.5, 5.5), dpi=120)
+    ax.set_facecolor(_SEA / 255)
+    for kind, pieces in (("I", env.islands), ("B", env.bridges)):
+        for k, p in enumerate(pieces):
+            if isinstance(p, Disc):
+                patch = Circle(p.center, p.radius)
+                mid = np.asarray(p.center)
+            else:
+                lo, hi = p.bounds()
+                patch = Rectangle(tuple(lo), *(hi - lo))
+                mid = (lo + hi) / 2
+            patch.set(facecolor=_LAND / 255, edgecolor=_SHORE / 255, linewidth=1.0, zorder=1)
+            ax.add_patch(patch)
+            size = 11 if kind == "I" else 8
+            ax.annotate(f"{kind}{k}", mid, ha="center", va="center", fontsize=size, zorder=3)
+    if goal is not None:
+        ax.add_patch(Circle(tuple(np.asarray(goal, float)), env.goal_eps, color=_GOAL / 255))
+        ax.plot([], [], "o", color=_GOAL / 255, label=f"goal (radius goal_eps={env.goal_eps})")
+    if start is not None:
+        ax.plot(*np.asarray(start, float), "o", color=_AGENT / 255, label="agent", zorder=4)
+    lo, hi = env.map_bounds
+    ax.set_xlim(lo[0] - 0.1, hi[0] + 0.1)
+    ax.set_ylim(lo[1] - 0.1, hi[1] + 0.1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.grid(True, alpha=0.3)
+    ax.set_title("IslandsBridges-v0 default map (bridges 0.1 wide)")
+    if start is not None or goal is not None:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
