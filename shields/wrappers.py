@@ -1,0 +1,115 @@
+"""Gymnasium wrappers that put a shield between the agent and the env (thesis Fig. "Shield RL").
+
+Every action the agent sends through :meth:`step` goes through the shield
+``a~_t = Psi(a_t, s_t)`` (thesis eq. shield) before it reaches the inner env; the inner env
+receives ``a~_t``. Each step's ``info`` carries
+
+- ``agent_action``: ``a_t`` as the agent sent it (float64 copy),
+- ``executed_action``: ``a~_t``, what the inner env received (float64),
+- ``shield_intervened``: ``True`` when the shield changed the action.
+
+The executed action is passed on in float64 (not cast to the action space's float32) so that the
+smart shield's exact projection is not perturbed by a float32 rounding of ~1e-8.
+
+Interface the wrapped env must expose on ``env.unwrapped``:
+
+================  ========================================================  ===============
+name              meaning                                                   used by
+================  ========================================================  ===============
+``state``         current state ``s`` (2,), float64                         both
+``predict``       ``predict(s, a) -> s_{t+1}`` one-step model               both
+``safe_distance`` ``M(s)``, signed distance to the region's edge (>=0 safe)  both
+``safe_pieces``   convex pieces (``Disc``/``Box``) whose union is safe      ``SmartShield``
+``action_scale``  ``k``: ``predict(s, a) = s + k clip(a, low, high)``        ``SmartShield``
+================  ========================================================  ===============
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from shields.islands import simple_shield, smart_shield
+
+__all__ = ["SimpleShield", "SmartShield"]
+
+
+class _ShieldWrapper(gym.Wrapper):
+    """Common part: interface checks and the ``info`` bookkeeping."""
+
+    _required: tuple[str, ...] = ("state", "predict", "safe_distance")
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        if not isinstance(env.action_space, spaces.Box):
+            raise TypeError(
+                f"{type(self).__name__} needs a Box action space, got {env.action_space!r}"
+            )
+        missing = [n for n in self._required if not hasattr(env.unwrapped, n)]
+        if missing:
+            raise TypeError(
+                f"{type(self).__name__} needs env.unwrapped to expose {list(self._required)}; "
+                f"{type(env.unwrapped).__name__} lacks {missing}"
+            )
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """``(a~, intervened)`` for the agent's action in the current state."""
+        raise NotImplementedError
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Shield the action, step the inner env with it, record both in ``info``."""
+        agent_action = np.array(action, dtype=np.float64)
+        executed, intervened = self.shield(agent_action.copy())
+        obs, reward, terminated, truncated, info = self.env.step(executed)
+        info = dict(info)
+        info["agent_action"] = agent_action
+        info["executed_action"] = np.array(executed, dtype=np.float64)
+        info["shield_intervened"] = bool(intervened)
+        return obs, reward, terminated, truncated, info
+
+
+class SimpleShield(_ShieldWrapper):
+    """Thesis ``Psi_simple``: ``a~ = a if M(predict(s, a)) >= 0 else 0`` (a zero step).
+
+    Works for any Box action space whose env exposes ``state``, ``predict`` and
+    ``safe_distance`` on ``env.unwrapped``; raises ``TypeError`` otherwise.
+    """
+
+    _required = ("state", "predict", "safe_distance")
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """See :func:`shields.islands.simple_shield`."""
+        u = self.env.unwrapped
+        return simple_shield(u.state, action, u.predict, u.safe_distance)
+
+
+class SmartShield(_ShieldWrapper):
+    """Thesis ``Psi_smart``: ``a~ = argmin ||a~ - a|| s.t. M(s + k a~) >= 0, a~ in the action
+    box`` -- the nearest safe action, computed exactly (:func:`shields.islands.smart_shield`).
+
+    Needs a 2D Box action space and ``state``, ``predict``, ``safe_distance``, ``safe_pieces``,
+    ``action_scale`` on ``env.unwrapped`` (affine model ``predict(s, a) = s + k clip(a)``);
+    raises ``TypeError`` otherwise.
+    """
+
+    _required = ("state", "predict", "safe_distance", "safe_pieces", "action_scale")
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        if env.action_space.shape != (2,):
+            raise TypeError(
+                f"SmartShield needs a 2D Box action space, got shape {env.action_space.shape}"
+            )
+        self._low = np.asarray(env.action_space.low, dtype=np.float64)
+        self._high = np.asarray(env.action_space.high, dtype=np.float64)
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """See :func:`shields.islands.smart_shield`."""
+        u = self.env.unwrapped
+        return smart_shield(
+            u.state, action, u.safe_pieces, float(u.action_scale), self._low, self._high
+        )
