@@ -12,6 +12,7 @@ A run directory holds::
     monitor/N.monitor.csv  one Monitor log per training env (r, l, t, is_success)
     eval.json           the final evaluation (see :func:`evaluate`)
     progress.csv        SB3's logger (losses/, charts/, shield/ keys)
+    vecnormalize.pkl    VecNormalize statistics (only with --normalize; reloaded by --resume)
 
 The evaluation runs the deterministic policy with the shield kept in place
 (as the thesis does) and reports the success rate over ``--eval-episodes``
@@ -46,7 +47,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from tqdm import tqdm
 
 import envs  # noqa: F401  (registers ihm/IslandsBridges-v0)
@@ -95,7 +96,15 @@ class Config:
     batch_size: int = opt(256, "minibatch size of the PPO update")
     n_epochs: int = opt(10, "PPO epochs per rollout")
     gamma: float = opt(0.99, "discount factor")
+    gae_lambda: float = opt(0.95, "GAE lambda")
+    clip_range: float = opt(0.2, "PPO clipping range")
     ent_coef: float = opt(0.0, "entropy bonus coefficient")
+    log_std_init: float = opt(0.0, "initial log std of the Gaussian policy")
+    normalize: bool = opt(
+        False,
+        "VecNormalize observations and rewards (stats saved as vecnormalize.pkl, "
+        "frozen for evaluation)",
+    )
     eval_episodes: int = opt(200, "episodes of the final evaluation (deterministic, shielded)")
     out: str = opt("runs", "directory that receives the run directory")
     resume: str | None = opt(None, "run directory to continue (loads model.zip and config.json)")
@@ -234,8 +243,13 @@ def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
         batch_size=cfg.batch_size,
         n_epochs=cfg.n_epochs,
         gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
         ent_coef=cfg.ent_coef,
-        policy_kwargs={"net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)}},
+        policy_kwargs={
+            "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
+            "log_std_init": cfg.log_std_init,
+        },
         seed=cfg.seed,
         device="cpu",
         verbose=cfg.verbose,
@@ -364,6 +378,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         cfg, seed, cfg.n_envs, run_dir / "monitor", append=cfg.resume is not None
     )
     eval_env = make_vec_env(cfg, seed + 1_000_000, min(cfg.n_envs, max(cfg.eval_episodes, 1)))
+    if cfg.normalize:
+        stats = run_dir / "vecnormalize.pkl"
+        if cfg.resume is not None and stats.is_file():
+            train_env = VecNormalize.load(str(stats), train_env)
+        else:
+            train_env = VecNormalize(train_env, gamma=cfg.gamma)
     # PPO(seed=...) / set_random_seed re-seeds random, numpy, torch and the action space
     # -----------------------------------------------------------------------------------------
 
@@ -382,6 +402,11 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
     train_s = time.perf_counter() - t0
     model.save(run_dir / "model.zip")
+    if isinstance(train_env, VecNormalize):
+        train_env.save(str(run_dir / "vecnormalize.pkl"))
+        # frozen observation statistics of training; raw rewards for the returns
+        eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
+        eval_env.obs_rms = train_env.obs_rms
 
     t0 = time.perf_counter()
     result = evaluate(model, eval_env, cfg.eval_episodes)
