@@ -8,6 +8,7 @@ map is in metres of an abstract plane).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -90,5 +91,27 @@ def signed_distance(pieces: Sequence[Piece], p: ArrayLike) -> NDArray[np.float64
     the union's edge that is exact away from the overlaps of pieces; its sign
     is exact everywhere, which is what the shields and the termination rule use
     (thesis: ``M(s) >= 0`` is safe).
+
+    A single point ``(2,)`` takes a float path (one env step calls this once or twice) that
+    computes bit for bit what the array path does: ``sqrt(dx*dx + dy*dy)`` is how
+    ``np.linalg.norm`` reduces two components.
     """
-    return np.max([piece.signed_distance(p) for piece in pieces], axis=0)
+    q = np.asarray(p, dtype=float)
+    if q.shape == (2,):
+        x, y = float(q[0]), float(q[1])
+        return np.float64(max(_point_depth(piece, x, y) for piece in pieces))
+    return np.max([piece.signed_distance(q) for piece in pieces], axis=0)
+
+
+def _point_depth(piece: Piece, x: float, y: float) -> float:
+    """``piece.signed_distance((x, y))`` in floats, the same operations in the same order."""
+    if isinstance(piece, Disc):
+        dx, dy = x - float(piece.center[0]), y - float(piece.center[1])
+        return float(piece.radius) - math.sqrt(dx * dx + dy * dy)
+    lx, ly, hx, hy = float(piece.lo[0]), float(piece.lo[1]), float(piece.hi[0]), float(piece.hi[1])
+    inside = min(min(x - lx, hx - x), min(y - ly, hy - y))
+    if inside >= 0:
+        return inside
+    ex = max(0.0, max(lx - x, x - hx))
+    ey = max(0.0, max(ly - y, y - hy))
+    return -math.sqrt(ex * ex + ey * ey)

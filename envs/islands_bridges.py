@@ -22,28 +22,39 @@ from numpy.typing import ArrayLike, NDArray
 
 from envs.geometry import Box, Disc, Piece, signed_distance
 
-__all__ = ["DEFAULT_BRIDGES", "DEFAULT_ISLANDS", "IslandsBridges", "draw_map"]
+__all__ = [
+    "DEFAULT_BRIDGES",
+    "DEFAULT_ISLANDS",
+    "SPUR_BRIDGES",
+    "SPUR_ISLANDS",
+    "IslandsBridges",
+    "draw_map",
+]
 
-#: The default map's islands, in map units (the plane spans about [0.1, 1.9] x [0.1, 1.85]).
-#: I0 south-west disc, I1 south-east box, I2 north-east disc, I3 north-west box, I4 central
-#: disc.
+#: The default map's islands, in map units (the plane spans [0.1, 1.9] x [0.15, 1.85]):
+#: I0 south-west disc, I1 south-east box, I2 north-east disc, I3 north-west box.
 DEFAULT_ISLANDS: tuple[Piece, ...] = (
     Disc(center=(0.4, 0.4), radius=0.3),
     Box(lo=(1.3, 0.15), hi=(1.9, 0.65)),
     Disc(center=(1.6, 1.55), radius=0.3),
     Box(lo=(0.1, 1.2), hi=(0.7, 1.8)),
-    Disc(center=(1.0, 1.0), radius=0.2),
 )
 
-#: The default map's bridges, all 0.1 wide: B0 I0-I1, B1 I1-I2, B2 I0-I3, B3 I3-I2 form a
-#: ring; B4 leaves B0 at a T-junction and leads north to the central island I4.
+#: The default map's bridges, all 0.1 wide, forming a ring (a cycle of grasps, as in
+#: continuous in-hand rotation): B0 I0-I1, B1 I1-I2, B2 I0-I3, B3 I3-I2.
 DEFAULT_BRIDGES: tuple[Piece, ...] = (
     Box(lo=(0.6, 0.35), hi=(1.35, 0.45)),
     Box(lo=(1.55, 0.6), hi=(1.65, 1.3)),
     Box(lo=(0.35, 0.65), hi=(0.45, 1.25)),
     Box(lo=(0.65, 1.5), hi=(1.35, 1.6)),
-    Box(lo=(0.95, 0.35), hi=(1.05, 0.85)),
 )
+
+#: A harder map (``ihm/IslandsBridgesSpur-v0``): the default ring plus a dead end, the central
+#: island I4 ``Disc((1.0, 1.0), 0.2)`` reached only by the spur B4 ``Box((0.95, 0.35),
+#: (1.05, 0.85))`` that leaves B0 at a T-junction. From I4 every goal lies behind the agent's
+#: back, so a policy must first walk away from it.
+SPUR_ISLANDS: tuple[Piece, ...] = (*DEFAULT_ISLANDS, Disc(center=(1.0, 1.0), radius=0.2))
+SPUR_BRIDGES: tuple[Piece, ...] = (*DEFAULT_BRIDGES, Box(lo=(0.95, 0.35), hi=(1.05, 0.85)))
 
 # Colours of the rgb_array rendering (thesis figure: red = current state, blue = goal).
 _SEA = np.array([205, 222, 235], dtype=np.uint8)
@@ -145,17 +156,18 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Default Map
 
-    Five islands and five bridges 0.1 wide (see ``DEFAULT_ISLANDS``, ``DEFAULT_BRIDGES``
-    and ``docs/islands_map.png``): I0 ``Disc((0.4, 0.4), 0.3)``, I1 ``Box((1.3, 0.15),
-    (1.9, 0.65))``, I2 ``Disc((1.6, 1.55), 0.3)``, I3 ``Box((0.1, 1.2), (0.7, 1.8))``,
-    I4 ``Disc((1.0, 1.0), 0.2)``; bridges B0 ``Box((0.6, 0.35), (1.35, 0.45))`` (I0-I1),
-    B1 ``Box((1.55, 0.6), (1.65, 1.3))`` (I1-I2), B2 ``Box((0.35, 0.65), (0.45, 1.25))``
-    (I0-I3), B3 ``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2), B4 ``Box((0.95, 0.35),
-    (1.05, 0.85))`` (from B0 to I4).
+    Four islands joined by four bridges 0.1 wide into a ring (see ``DEFAULT_ISLANDS``,
+    ``DEFAULT_BRIDGES`` and ``docs/islands_map.png``): I0 ``Disc((0.4, 0.4), 0.3)``, I1
+    ``Box((1.3, 0.15), (1.9, 0.65))``, I2 ``Disc((1.6, 1.55), 0.3)``, I3 ``Box((0.1, 1.2),
+    (0.7, 1.8))``; bridges B0 ``Box((0.6, 0.35), (1.35, 0.45))`` (I0-I1), B1 ``Box((1.55,
+    0.6), (1.65, 1.3))`` (I1-I2), B2 ``Box((0.35, 0.65), (0.45, 1.25))`` (I0-I3), B3
+    ``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2). ``SPUR_ISLANDS``/``SPUR_BRIDGES`` add a dead-end
+    island in the middle (registered as ``ihm/IslandsBridgesSpur-v0``).
 
     ## Version History
 
-    - v0: initial version (thesis chapter 7).
+    - v0: initial version (thesis chapter 7). The default map was first the ring plus the
+      dead-end island that is now ``SPUR_ISLANDS``/``SPUR_BRIDGES``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}

@@ -12,7 +12,13 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import envs
 from envs import Box, Disc, IslandsBridges
-from envs.islands_bridges import DEFAULT_BRIDGES, DEFAULT_ISLANDS, draw_map
+from envs.islands_bridges import (
+    DEFAULT_BRIDGES,
+    DEFAULT_ISLANDS,
+    SPUR_BRIDGES,
+    SPUR_ISLANDS,
+    draw_map,
+)
 
 ENV_ID = "ihm/IslandsBridges-v0"
 
@@ -171,30 +177,45 @@ def test_default_map_is_fixed():
         Box(lo=(1.3, 0.15), hi=(1.9, 0.65)),
         Disc(center=(1.6, 1.55), radius=0.3),
         Box(lo=(0.1, 1.2), hi=(0.7, 1.8)),
-        Disc(center=(1.0, 1.0), radius=0.2),
     )
     assert DEFAULT_BRIDGES == (
         Box(lo=(0.6, 0.35), hi=(1.35, 0.45)),
         Box(lo=(1.55, 0.6), hi=(1.65, 1.3)),
         Box(lo=(0.35, 0.65), hi=(0.45, 1.25)),
         Box(lo=(0.65, 1.5), hi=(1.35, 1.6)),
-        Box(lo=(0.95, 0.35), hi=(1.05, 0.85)),
     )
     env = IslandsBridges()
     assert env.islands == DEFAULT_ISLANDS and env.bridges == DEFAULT_BRIDGES
-    for b in DEFAULT_BRIDGES:  # bridges are narrow
-        lo, hi = b.bounds()
-        assert min(hi - lo) == pytest.approx(0.1)
-    # islands are disjoint, each bridge's ends lie on land (the map is connected)
-    for k, p in enumerate(DEFAULT_ISLANDS):
-        for q in DEFAULT_ISLANDS[k + 1 :]:
-            assert not _overlap(p, q)
-    other = DEFAULT_ISLANDS + DEFAULT_BRIDGES
-    for b in DEFAULT_BRIDGES:
-        assert sum(_overlap(b, q) for q in other if q is not b) >= 2
+    # the spur map is the ring plus one dead-end island and its bridge
+    assert SPUR_ISLANDS[:4] == DEFAULT_ISLANDS and SPUR_BRIDGES[:4] == DEFAULT_BRIDGES
+    assert SPUR_ISLANDS[4:] == (Disc(center=(1.0, 1.0), radius=0.2),)
+    assert SPUR_BRIDGES[4:] == (Box(lo=(0.95, 0.35), hi=(1.05, 0.85)),)
+    for islands, bridges in ((DEFAULT_ISLANDS, DEFAULT_BRIDGES), (SPUR_ISLANDS, SPUR_BRIDGES)):
+        for b in bridges:  # bridges are narrow
+            lo, hi = b.bounds()
+            assert min(hi - lo) == pytest.approx(0.1)
+        # islands are disjoint, each bridge's ends lie on land (the map is connected)
+        for k, p in enumerate(islands):
+            for q in islands[k + 1 :]:
+                assert not _overlap(p, q)
+        other = islands + bridges
+        for b in bridges:
+            assert sum(_overlap(b, q) for q in other if q is not b) >= 2
+    # the ring: each island touches exactly two bridges; on the spur map I4 touches one
+    for k, isl in enumerate(SPUR_ISLANDS):
+        touching = sum(_overlap(isl, b) for b in SPUR_BRIDGES)
+        assert touching == (1 if k == 4 else 2)  # B4 touches I4 and B0 only
     # the documentation names the same coordinates
     assert "Disc((1.6, 1.55), 0.3)" in IslandsBridges.__doc__
-    assert "Box((0.95, 0.35),\n    (1.05, 0.85))" in IslandsBridges.__doc__
+    assert "``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2)" in IslandsBridges.__doc__
+
+
+def test_spur_map_is_registered():
+    env = gym.make("ihm/IslandsBridgesSpur-v0", reward="sparse")
+    assert env.unwrapped.islands == SPUR_ISLANDS and env.unwrapped.bridges == SPUR_BRIDGES
+    assert env.unwrapped.reward_mode == "sparse" and env.spec.max_episode_steps == 200
+    assert env.unwrapped.safe_distance((1.0, 1.0)) == pytest.approx(0.2)  # centre of I4
+    assert gym.make(ENV_ID).unwrapped.safe_distance((1.0, 1.0)) < 0  # sea on the ring map
 
 
 def _overlap(p, q) -> bool:
@@ -228,7 +249,8 @@ def test_render_shows_agent_and_goal():
 
     assert pixel(0.4, 0.4) == (220, 30, 30)  # agent, red
     assert pixel(1.6, 1.55) == (30, 80, 220)  # goal, blue
-    assert pixel(1.0, 1.0) == (236, 216, 165)  # land (I4)
+    assert pixel(1.0, 0.4) == (236, 216, 165)  # land (B0)
+    assert pixel(1.0, 1.0) == (205, 222, 235)  # sea (the ring's middle)
     assert pixel(0.8, 0.6) == (205, 222, 235)  # sea
     env.step(np.array([1.0, 0.0]))
     assert pixel(0.5, 0.4) != (220, 30, 30)  # the frame follows the agent

@@ -180,6 +180,22 @@ def test_disc_box_projection_matches_dense_sampling():
     assert n_checked > 100 and n_empty > 10
 
 
+def test_single_point_signed_distance_is_bitwise_the_array_one():
+    """The float path for one point (what the env and the shields call every step) must give
+    exactly the array path's value, also for points on an edge (projections), where a last-bit
+    difference would flip the safety verdict."""
+    rng = np.random.default_rng(11)
+    pts = [rng.uniform(-1.5, 1.5, size=(3000, 2))]
+    pts += [np.array([piece.project(q) for q in rng.uniform(-1.5, 1.5, size=(500, 2))])
+            for piece in PIECES]  # fmt: skip
+    pts = np.concatenate(pts)
+    batch = signed_distance(PIECES, pts)
+    single = np.array([signed_distance(PIECES, q) for q in pts])
+    assert np.array_equal(batch, single)
+    assert np.sum(batch == 0.0) > 100  # edge points were exercised
+    assert np.array_equal(batch >= 0, single >= 0)
+
+
 def test_union_projection_is_nearest_piece_projection():
     q = np.array([0.7, 0.3])  # between the big disc, the bridge and the vertical bridge
     p = project_union_box(PIECES, [-10, -10], [10, 10], q)

@@ -9,11 +9,13 @@ from __future__ import annotations
 import csv
 import json
 import os
+import pickle
 import subprocess
 import sys
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from train import islands, ppo
@@ -67,6 +69,14 @@ def test_ppo_smoke_run_writes_model_config_eval_and_monitor(run_dir: Path) -> No
     assert lines[0].startswith("#") and lines[1] == "r,l,t,is_success"
     assert len(lines) > 2  # the untrained policy falls off islands within 128 steps
     assert (run_dir / "monitor" / "1.monitor.csv").is_file()
+    assert cfg["normalize"] and stats_count(run_dir) == pytest.approx(2 + 256)
+
+
+def stats_count(run_dir: Path) -> float:
+    """Observations seen by the run's VecNormalize: n_envs (2) per reset of the VecEnv, at the start
+    of each (resumed) run, plus one per env step (1e-4 initial count)."""
+    with (run_dir / "vecnormalize.pkl").open("rb") as f:
+        return float(pickle.load(f).obs_rms.count)
 
 
 def test_ppo_resume_continues_the_run(run_dir: Path) -> None:
@@ -80,6 +90,8 @@ def test_ppo_resume_continues_the_run(run_dir: Path) -> None:
     assert after[: len(before)] == before and len(after) > len(before)
     assert sum(line.startswith("r,l,t") for line in after) == 1  # appended, no second header
     assert len(list((run_dir.parent).iterdir())) == 1  # no new run directory
+    # the normalisation statistics were reloaded and went on counting, not restarted
+    assert stats_count(run_dir) == pytest.approx(2 + 256 + 2 + 128)
 
 
 def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
@@ -105,6 +117,27 @@ def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     assert "| smart | sparse | small |" in (out / "summary.md").read_text()
     assert "| none | dense | small |" in p.stdout
+
+
+def test_build_envs_share_frozen_normalisation_and_lr_schedule() -> None:
+    cfg = ppo.Config(n_envs=2, eval_episodes=3, lr_schedule="linear", learning_rate=1e-3)
+    train_env, eval_env = ppo.build_envs(cfg, seed=5)
+    assert train_env.training and not eval_env.training and not eval_env.norm_reward
+    assert eval_env.obs_rms is train_env.obs_rms  # evaluation sees the current statistics
+    train_env.reset()
+    train_env.step(np.zeros((2, 2), dtype=np.float32))
+    before = eval_env.obs_rms.count
+    eval_env.reset()
+    eval_env.step(np.zeros((2, 2), dtype=np.float32))
+    assert eval_env.obs_rms.count == before  # evaluation does not update them
+    model = ppo.build_model(cfg, train_env)
+    assert model.lr_schedule(1.0) == pytest.approx(1e-3)  # progress_remaining 1 -> 0
+    assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
+    raw_train, raw_eval = ppo.build_envs(ppo.Config(n_envs=2, normalize=False), seed=5)
+    assert not isinstance(raw_train, ppo.VecNormalize)
+    assert ppo.build_model(ppo.Config(), raw_train).lr_schedule(0.25) == pytest.approx(3e-4)
+    for env in (train_env, eval_env, raw_train, raw_eval):
+        env.close()
 
 
 def test_help_documents_every_option() -> None:

@@ -24,6 +24,7 @@ none simple smart`` gives the full cross. ``--quick`` is a smoke-sized run
 from __future__ import annotations
 
 import csv
+import dataclasses
 import multiprocessing as mp
 import sys
 import time
@@ -148,10 +149,11 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from train.ppo import build_model, evaluate, make_vec_env, seed_everything
+    from train.ppo import build_envs, build_model, evaluate, seed_everything, train_callbacks
 
     torch.set_num_threads(1)
-    cfg = Config(
+    cfg = dataclasses.replace(
+        Config(),  # every other PPO setting is train.ppo's default
         env_id=bc.env_id,
         shield=job["shield"],
         reward=job["reward"],
@@ -168,8 +170,7 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
     )
     # ---- seeds, all in one place (as in train.ppo) ----
     seed_everything(cfg.seed)
-    train_env = make_vec_env(cfg, cfg.seed, cfg.n_envs)
-    eval_env = make_vec_env(cfg, cfg.seed + 1_000_000, cfg.n_envs)
+    train_env, eval_env = build_envs(cfg, cfg.seed)
     model = build_model(cfg, train_env)  # PPO(seed=cfg.seed)
     # ---------------------------------------------------
     rows: list[dict[str, Any]] = []
@@ -204,7 +205,7 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
             return True
 
     record()  # step 0: the untrained policy
-    model.learn(bc.steps, callback=EvalEvery())
+    model.learn(bc.steps, callback=[*train_callbacks(cfg), EvalEvery()])
     record(bc.final_episodes)
     train_env.close()
     eval_env.close()

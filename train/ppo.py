@@ -47,6 +47,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from tqdm import tqdm
 
@@ -57,6 +58,7 @@ __all__ = [
     "Config",
     "TrainStats",
     "TqdmProgress",
+    "build_envs",
     "build_model",
     "evaluate",
     "main",
@@ -65,6 +67,7 @@ __all__ = [
     "parse_config",
     "run_name",
     "seed_everything",
+    "train_callbacks",
 ]
 
 SHIELDS = ("none", "simple", "smart")
@@ -91,17 +94,24 @@ class Config:
     subproc: bool = opt(False, "run the training envs in subprocesses (SubprocVecEnv)")
     pi: list[int] = opt([64, 64], "hidden layer sizes of the policy net")
     vf: list[int] = opt([64, 64], "hidden layer sizes of the value net (a separate net)")
-    learning_rate: float = opt(3e-4, "Adam learning rate")
-    n_steps: int = opt(256, "rollout length per env (rollout = n_steps * n_envs samples)")
-    batch_size: int = opt(256, "minibatch size of the PPO update")
-    n_epochs: int = opt(10, "PPO epochs per rollout")
-    gamma: float = opt(0.99, "discount factor")
+    learning_rate: float = opt(
+        3e-4, "Adam learning rate (the initial one with --lr-schedule linear)"
+    )
+    lr_schedule: str = opt(
+        "constant",
+        "learning rate over training: constant, or linear decay to 0 at --total-steps",
+        choices=("constant", "linear"),
+    )
+    n_steps: int = opt(128, "rollout length per env (rollout = n_steps * n_envs samples)")
+    batch_size: int = opt(128, "minibatch size of the PPO update")
+    n_epochs: int = opt(20, "PPO epochs per rollout")
+    gamma: float = opt(0.98, "discount factor")
     gae_lambda: float = opt(0.95, "GAE lambda")
     clip_range: float = opt(0.2, "PPO clipping range")
     ent_coef: float = opt(0.0, "entropy bonus coefficient")
-    log_std_init: float = opt(0.0, "initial log std of the Gaussian policy")
+    log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
     normalize: bool = opt(
-        False,
+        True,
         "VecNormalize observations and rewards (stats saved as vecnormalize.pkl, "
         "frozen for evaluation)",
     )
@@ -114,7 +124,7 @@ class Config:
 
 def _type_of(f: dataclasses.Field) -> tuple[Callable[[str], Any], bool]:
     """The scalar argparse ``type`` of a field and whether it is a list."""
-    t = str(f.type)
+    t = str(f.type).removesuffix(" | None")
     if t.startswith("list["):
         return {"list[int]": int, "list[float]": float}.get(t, str), True
     for name, conv in (("bool", bool), ("int", int), ("float", float)):
@@ -219,6 +229,41 @@ def make_vec_env(
     return vec
 
 
+def build_envs(
+    cfg: Config, seed: int, monitor_dir: Path | None = None, stats: Path | None = None
+) -> tuple[VecEnv, VecEnv]:
+    """The training and evaluation VecEnvs of a run (both with the full :func:`make_env` stack).
+
+    Training: ``cfg.n_envs`` envs, reset seeds ``seed + i``, Monitor CSVs in ``monitor_dir``
+    (appended to when ``stats`` is given, i.e. on resume). Evaluation: ``min(n_envs,
+    eval_episodes)`` envs seeded from ``seed + 1_000_000``. With ``cfg.normalize`` the training
+    env is a ``VecNormalize`` (observations and discounted-return reward scaling; loaded from
+    ``stats`` when that file exists) and the evaluation env a frozen ``VecNormalize`` that shares
+    the training env's observation statistics and returns raw rewards.
+    """
+    resume = stats is not None
+    train_env = make_vec_env(cfg, seed, cfg.n_envs, monitor_dir, append=resume)
+    eval_env = make_vec_env(cfg, seed + 1_000_000, min(cfg.n_envs, max(cfg.eval_episodes, 1)))
+    if cfg.normalize:
+        if stats is not None and stats.is_file():
+            train_env = VecNormalize.load(str(stats), train_env)
+        else:
+            train_env = VecNormalize(train_env, gamma=cfg.gamma)
+        eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
+        eval_env.obs_rms = train_env.obs_rms  # the same object: updated as training goes on
+    return train_env, eval_env
+
+
+def train_callbacks(cfg: Config, desc: str = "") -> list[BaseCallback]:
+    """Training statistics (success and shield intervention rates) and the progress bar."""
+    callbacks: list[BaseCallback] = [TrainStats()]
+    if cfg.progress:
+        rollout = cfg.n_steps * cfg.n_envs  # learn() stops at the first rollout end past the budget
+        total = -(-cfg.total_steps // rollout) * rollout
+        callbacks.append(TqdmProgress(total, desc=desc))
+    return callbacks
+
+
 def seed_everything(seed: int) -> None:
     """Python, numpy and torch RNGs (env and action-space seeds are set where they are built)."""
     random.seed(seed)
@@ -238,7 +283,11 @@ def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
     return PPO(
         "MlpPolicy",
         vec_env,
-        learning_rate=cfg.learning_rate,
+        learning_rate=(
+            cfg.learning_rate
+            if cfg.lr_schedule == "constant"
+            else LinearSchedule(cfg.learning_rate, 0.0, 1.0)
+        ),
         n_steps=cfg.n_steps,
         batch_size=cfg.batch_size,
         n_epochs=cfg.n_epochs,
@@ -374,16 +423,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     # a resumed run draws fresh episodes: its seeds are offset by the steps already done
     seed = cfg.seed + done_steps
     seed_everything(seed)  # random, numpy, torch
-    train_env = make_vec_env(  # action_space i: seed + i; reset seed i: seed + i
-        cfg, seed, cfg.n_envs, run_dir / "monitor", append=cfg.resume is not None
-    )
-    eval_env = make_vec_env(cfg, seed + 1_000_000, min(cfg.n_envs, max(cfg.eval_episodes, 1)))
-    if cfg.normalize:
-        stats = run_dir / "vecnormalize.pkl"
-        if cfg.resume is not None and stats.is_file():
-            train_env = VecNormalize.load(str(stats), train_env)
-        else:
-            train_env = VecNormalize(train_env, gamma=cfg.gamma)
+    stats = run_dir / "vecnormalize.pkl" if cfg.resume is not None else None
+    train_env, eval_env = build_envs(cfg, seed, run_dir / "monitor", stats)
     # PPO(seed=...) / set_random_seed re-seeds random, numpy, torch and the action space
     # -----------------------------------------------------------------------------------------
 
@@ -394,19 +435,13 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         model = build_model(cfg, train_env)
     model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
 
-    callbacks: list[BaseCallback] = [TrainStats()]
-    if cfg.progress:
-        rollout = cfg.n_steps * cfg.n_envs  # learn() stops at the first rollout end past the budget
-        callbacks.append(TqdmProgress(-(-cfg.total_steps // rollout) * rollout, desc=run_dir.name))
+    callbacks = train_callbacks(cfg, desc=run_dir.name)
     t0 = time.perf_counter()
     model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
     train_s = time.perf_counter() - t0
     model.save(run_dir / "model.zip")
     if isinstance(train_env, VecNormalize):
         train_env.save(str(run_dir / "vecnormalize.pkl"))
-        # frozen observation statistics of training; raw rewards for the returns
-        eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
-        eval_env.obs_rms = train_env.obs_rms
 
     t0 = time.perf_counter()
     result = evaluate(model, eval_env, cfg.eval_episodes)
