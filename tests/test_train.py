@@ -110,7 +110,7 @@ def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     }
     assert sorted({int(r["steps"]) for r in rows}) == [0, 128, 256]
     assert all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
-    assert all(r["net"] == "small" and r["pi"] == "64x64" for r in rows)
+    assert all(r["net"] == "small" and r["pi"] == "16x16" for r in rows)
     smart = [r for r in rows if r["shield"] == "smart"]
     assert all(float(r["failure_rate"]) == 0.0 for r in smart)  # the shield stays in place
     png = (out / "islands.png").read_bytes()

@@ -15,10 +15,11 @@ Writes to ``--out``::
                   configuration (mean, min, max over seeds) and the first
                   evaluated step where the mean reaches 99 %
 
-By default every shield and reward runs with the large nets and the smart
-shield also with the small ones (the network-size study); ``--study-shields
-none simple smart`` gives the full cross. ``--quick`` is a smoke-sized run
-(1 seed, 5k steps, small nets, 20 episodes).
+By default every shield and reward runs with the medium nets (2x64, train.ppo's
+default) and the smart shield also with the small ones (2x16: the network-size
+study; ``--nets medium small large`` adds 2x256, about twice as slow to train);
+``--study-shields none simple smart`` gives the full cross. ``--quick`` is a smoke-sized run (1 seed, 5k steps, small nets, 20
+episodes).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from train.ppo import REWARDS, SHIELDS, Config, build_parser, opt
 
 __all__ = ["NETS", "BenchConfig", "main", "plot", "run_job", "summary_table"]
 
-NETS = {"small": [64, 64], "large": [256, 256, 256, 256]}
+NETS = {"small": [16, 16], "medium": [64, 64], "large": [256, 256]}
 """Network sizes of the study; policy and value nets are separate and of equal size."""
 
 COLUMNS = [
@@ -71,8 +72,9 @@ class BenchConfig:
     shields: list[str] = opt(list(SHIELDS), "shields to compare", choices=SHIELDS)
     rewards: list[str] = opt(list(REWARDS), "reward modes (one chart panel each)", choices=REWARDS)
     nets: list[str] = opt(
-        ["large", "small"],
-        "network sizes (large: 4x256, small: 2x64); the first runs for every shield, the others "
+        ["medium", "small"],
+        "network sizes (small: 2x16, medium: 2x64, large: 2x256); the first runs for every "
+        "shield, the others "
         "for --study-shields only",
     )
     study_shields: list[str] = opt(
@@ -237,7 +239,7 @@ def _curves(rows: list[dict[str, Any]]) -> dict[tuple[str, str, str], np.ndarray
 
 
 COLOURS = {"none": "tab:red", "simple": "tab:blue", "smart": "tab:green"}
-STYLES = {"large": "-", "small": "--"}
+STYLES = {"medium": "-", "small": ":", "large": "--"}
 
 
 def plot(rows: list[dict[str, Any]], path: Path, title: str = "") -> None:

@@ -108,12 +108,15 @@ class Config:
     gamma: float = opt(0.98, "discount factor")
     gae_lambda: float = opt(0.95, "GAE lambda")
     clip_range: float = opt(0.2, "PPO clipping range")
-    ent_coef: float = opt(0.0, "entropy bonus coefficient")
+    ent_coef: float = opt(0.01, "entropy bonus coefficient")
     log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
     normalize: bool = opt(
         True,
-        "VecNormalize observations and rewards (stats saved as vecnormalize.pkl, "
+        "VecNormalize the observations (running mean and std; saved as vecnormalize.pkl, "
         "frozen for evaluation)",
+    )
+    norm_reward: bool = opt(
+        True, "with --normalize, also scale rewards by the std of the discounted return"
     )
     eval_episodes: int = opt(200, "episodes of the final evaluation (deterministic, shielded)")
     out: str = opt("runs", "directory that receives the run directory")
@@ -248,7 +251,7 @@ def build_envs(
         if stats is not None and stats.is_file():
             train_env = VecNormalize.load(str(stats), train_env)
         else:
-            train_env = VecNormalize(train_env, gamma=cfg.gamma)
+            train_env = VecNormalize(train_env, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
         eval_env.obs_rms = train_env.obs_rms  # the same object: updated as training goes on
     return train_env, eval_env
