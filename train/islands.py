@@ -18,8 +18,8 @@ Writes to ``--out``::
 By default every shield and reward runs with the medium nets (2x64, train.ppo's
 default) and the smart shield also with the small ones (2x16: the network-size
 study; ``--nets medium small large`` adds 2x256, about twice as slow to train);
-``--study-shields none simple smart`` gives the full cross. ``--quick`` is a smoke-sized run (1 seed, 5k steps, small nets, 20
-episodes).
+``--study-shields none simple smart`` gives the full cross. ``--quick`` is a
+smoke-sized run (1 seed, 5k steps, small nets, 20 episodes).
 """
 
 from __future__ import annotations
@@ -257,7 +257,8 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str = "") -> None:
             if rew != reward:
                 continue
             colour, style = COLOURS.get(shield, "k"), STYLES.get(net, ":")
-            ax.plot(c[:, 0], c[:, 1], style, color=colour, label=f"{shield}, {net} net")
+            size = "x".join(map(str, NETS[net])) if net in NETS else net
+            ax.plot(c[:, 0], c[:, 1], style, color=colour, label=f"{shield}, {net} net ({size})")
             ax.fill_between(c[:, 0], c[:, 2], c[:, 3], color=colour, alpha=0.15, lw=0)
         ax.set_title(f"{reward} reward")
         ax.set_xlabel("training steps")
