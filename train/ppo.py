@@ -12,7 +12,7 @@ A run directory holds::
     monitor/N.monitor.csv  one Monitor log per training env (r, l, t, is_success)
     eval.json           the final evaluation (see :func:`evaluate`)
     progress.csv        SB3's logger (losses/, charts/, shield/ keys)
-    vecnormalize.pkl    VecNormalize statistics (only with --normalize; reloaded by --resume)
+    vecnormalize.pkl    VecNormalize statistics (--normalize, the default; reloaded by --resume)
 
 The evaluation runs the deterministic policy with the shield kept in place
 (as the thesis does) and reports the success rate over ``--eval-episodes``
