@@ -74,8 +74,7 @@ class BenchConfig:
     nets: list[str] = opt(
         ["medium", "small"],
         "network sizes (small: 2x16, medium: 2x64, large: 2x256); the first runs for every "
-        "shield, the others "
-        "for --study-shields only",
+        "shield, the others for --study-shields only",
     )
     study_shields: list[str] = opt(
         ["smart"], "shields also trained with the other --nets (the network-size study)"
