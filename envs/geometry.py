@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Box", "Disc", "Piece", "signed_distance"]
+__all__ = ["Box", "Disc", "Piece", "point_depth", "signed_distance"]
 
 
 @dataclass(frozen=True)
@@ -99,12 +99,13 @@ def signed_distance(pieces: Sequence[Piece], p: ArrayLike) -> NDArray[np.float64
     q = np.asarray(p, dtype=float)
     if q.shape == (2,):
         x, y = float(q[0]), float(q[1])
-        return np.float64(max(_point_depth(piece, x, y) for piece in pieces))
+        return np.float64(max(point_depth(piece, x, y) for piece in pieces))
     return np.max([piece.signed_distance(q) for piece in pieces], axis=0)
 
 
-def _point_depth(piece: Piece, x: float, y: float) -> float:
-    """``piece.signed_distance((x, y))`` in floats, the same operations in the same order."""
+def point_depth(piece: Piece, x: float, y: float) -> float:
+    """``piece.signed_distance((x, y))`` in floats, the same operations in the same order, so
+    the same value to the last bit (the shields' safety checks rely on that)."""
     if isinstance(piece, Disc):
         dx, dy = x - float(piece.center[0]), y - float(piece.center[1])
         return float(piece.radius) - math.sqrt(dx * dx + dy * dy)

@@ -45,7 +45,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from envs.geometry import Box, Disc, Piece, signed_distance
+from envs.geometry import Box, Disc, Piece, point_depth
 
 __all__ = [
     "MARGIN_REL",
@@ -268,29 +268,11 @@ def project_union_box(
 # --------------------------------------------------------------------------- smart shield
 
 
-def _depth(piece: Piece, x: float, y: float) -> float:
-    """Float version of ``piece.signed_distance`` (used only away from the boundary)."""
-    if isinstance(piece, Disc):
-        return piece.radius - math.hypot(x - piece.center[0], y - piece.center[1])
-    inside = min(x - piece.lo[0], piece.hi[0] - x, y - piece.lo[1], piece.hi[1] - y)
-    if inside >= 0.0:
-        return inside
-    return -math.sqrt(_dist2_lower_bound(piece, x, y))
-
-
-def _is_safe(pieces: Sequence[Piece], x: float, y: float, tol: float) -> bool:
-    """``M((x, y)) >= 0`` with :func:`envs.geometry.signed_distance` semantics; float fast
-    path, the exact numpy function decides points within ``tol`` of an edge."""
-    near = False
-    for piece in pieces:
-        d = _depth(piece, x, y)
-        if d > tol:
-            return True
-        if d >= -tol:
-            near = True
-    if not near:
-        return False
-    return bool(signed_distance(pieces, np.array([x, y])) >= 0.0)
+def _is_safe(pieces: Sequence[Piece], x: float, y: float) -> bool:
+    """``M((x, y)) >= 0``: bit for bit the env's termination rule (``signed_distance`` of one
+    point is the largest :func:`envs.geometry.point_depth`), stopping at the first piece that
+    holds the point."""
+    return any(point_depth(piece, x, y) >= 0.0 for piece in pieces)
 
 
 def _bounds2(v: ArrayLike) -> Point:
@@ -342,7 +324,7 @@ def smart_shield(
     length = 1.0 + max(abs(sx), abs(sy)) + k
     # 0. already safe? (same arithmetic as the env: s + k * clip(a))
     cx, cy = min(max(ax, lo[0]), hi[0]), min(max(ay, lo[1]), hi[1])
-    if _is_safe(pieces, sx + k * cx, sy + k * cy, 1e-12 * length):
+    if _is_safe(pieces, sx + k * cx, sy + k * cy):
         return a, False
     rl = (sx + k * lo[0], sy + k * lo[1])
     rh = (sx + k * hi[0], sy + k * hi[1])
@@ -355,6 +337,6 @@ def smart_shield(
         ex = min(max((px - sx) / k, lo[0]), hi[0])
         ey = min(max((py - sy) / k, lo[1]), hi[1])
         # exact check in the chosen piece (union depth >= piece depth)
-        if float(piece.signed_distance(np.array([sx + k * ex, sy + k * ey]))) >= 0.0:
+        if point_depth(piece, sx + k * ex, sy + k * ey) >= 0.0:
             return np.array([ex, ey]), True
     return np.zeros(2), True

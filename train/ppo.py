@@ -127,7 +127,7 @@ class Config:
 
 def _type_of(f: dataclasses.Field) -> tuple[Callable[[str], Any], bool]:
     """The scalar argparse ``type`` of a field and whether it is a list."""
-    t = str(f.type).removesuffix(" | None")
+    t = str(f.type)
     if t.startswith("list["):
         return {"list[int]": int, "list[float]": float}.get(t, str), True
     for name, conv in (("bool", bool), ("int", int), ("float", float)):
