@@ -1,22 +1,42 @@
 """Gymnasium environments of the project.
 
-``import envs`` registers ``ihm/IslandsBridges-v0`` (the default ring map) and
-``ihm/IslandsBridgesSpur-v0`` (the ring plus a dead-end island), 200 steps per episode:
-``gym.make("ihm/IslandsBridges-v0", reward="sparse")``.
+``import envs`` registers one id per map of the islands-and-bridges world, 200 steps per
+episode, e.g. ``gym.make("ihm/IslandsBridges-v0", reward="sparse")``:
+
+- ``ihm/IslandsBridges-v0``: the five-island map, the ring plus the dead-end island I4 reached
+  by the spur B4 (``SPUR_ISLANDS``/``SPUR_BRIDGES``, the default map of ``IslandsBridges()``;
+  the first shipped map);
+- ``ihm/IslandsBridgesRing-v0``: the four-island ring (``RING_ISLANDS``/``RING_BRIDGES``).
 """
 
 import gymnasium
 
 from envs.geometry import Box, Disc
-from envs.islands_bridges import IslandsBridges
+from envs.islands_bridges import (
+    DEFAULT_BRIDGES,
+    DEFAULT_ISLANDS,
+    RING_BRIDGES,
+    RING_ISLANDS,
+    SPUR_BRIDGES,
+    SPUR_ISLANDS,
+    IslandsBridges,
+)
 
-__all__ = ["Box", "Disc", "IslandsBridges"]
-
-from envs.islands_bridges import SPUR_BRIDGES, SPUR_ISLANDS
+__all__ = [
+    "DEFAULT_BRIDGES",
+    "DEFAULT_ISLANDS",
+    "RING_BRIDGES",
+    "RING_ISLANDS",
+    "SPUR_BRIDGES",
+    "SPUR_ISLANDS",
+    "Box",
+    "Disc",
+    "IslandsBridges",
+]
 
 for _id, _kwargs in (
-    ("ihm/IslandsBridges-v0", {}),
-    ("ihm/IslandsBridgesSpur-v0", {"islands": SPUR_ISLANDS, "bridges": SPUR_BRIDGES}),
+    ("ihm/IslandsBridges-v0", {"islands": SPUR_ISLANDS, "bridges": SPUR_BRIDGES}),
+    ("ihm/IslandsBridgesRing-v0", {"islands": RING_ISLANDS, "bridges": RING_BRIDGES}),
 ):
     if _id not in gymnasium.registry:
         gymnasium.register(

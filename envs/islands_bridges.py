@@ -25,36 +25,44 @@ from envs.geometry import Box, Disc, Piece, signed_distance
 __all__ = [
     "DEFAULT_BRIDGES",
     "DEFAULT_ISLANDS",
+    "RING_BRIDGES",
+    "RING_ISLANDS",
     "SPUR_BRIDGES",
     "SPUR_ISLANDS",
     "IslandsBridges",
     "draw_map",
 ]
 
-#: The default map's islands, in map units (the plane spans [0.1, 1.9] x [0.15, 1.85]):
-#: I0 south-west disc, I1 south-east box, I2 north-east disc, I3 north-west box.
-DEFAULT_ISLANDS: tuple[Piece, ...] = (
+#: The ring map's islands (``ihm/IslandsBridgesRing-v0``), in map units (the plane spans
+#: [0.1, 1.9] x [0.15, 1.85]): I0 south-west disc, I1 south-east box, I2 north-east disc,
+#: I3 north-west box.
+RING_ISLANDS: tuple[Piece, ...] = (
     Disc(center=(0.4, 0.4), radius=0.3),
     Box(lo=(1.3, 0.15), hi=(1.9, 0.65)),
     Disc(center=(1.6, 1.55), radius=0.3),
     Box(lo=(0.1, 1.2), hi=(0.7, 1.8)),
 )
 
-#: The default map's bridges, all 0.1 wide, forming a ring (a cycle of grasps, as in
-#: continuous in-hand rotation): B0 I0-I1, B1 I1-I2, B2 I0-I3, B3 I3-I2.
-DEFAULT_BRIDGES: tuple[Piece, ...] = (
+#: The ring map's bridges, all 0.1 wide, forming a ring (a cycle of grasps, as in continuous
+#: in-hand rotation): B0 I0-I1, B1 I1-I2, B2 I0-I3, B3 I3-I2.
+RING_BRIDGES: tuple[Piece, ...] = (
     Box(lo=(0.6, 0.35), hi=(1.35, 0.45)),
     Box(lo=(1.55, 0.6), hi=(1.65, 1.3)),
     Box(lo=(0.35, 0.65), hi=(0.45, 1.25)),
     Box(lo=(0.65, 1.5), hi=(1.35, 1.6)),
 )
 
-#: A harder map (``ihm/IslandsBridgesSpur-v0``): the default ring plus a dead end, the central
-#: island I4 ``Disc((1.0, 1.0), 0.2)`` reached only by the spur B4 ``Box((0.95, 0.35),
-#: (1.05, 0.85))`` that leaves B0 at a T-junction. From I4 every goal lies behind the agent's
-#: back, so a policy must first walk away from it.
-SPUR_ISLANDS: tuple[Piece, ...] = (*DEFAULT_ISLANDS, Disc(center=(1.0, 1.0), radius=0.2))
-SPUR_BRIDGES: tuple[Piece, ...] = (*DEFAULT_BRIDGES, Box(lo=(0.95, 0.35), hi=(1.05, 0.85)))
+#: The five-island map (``ihm/IslandsBridges-v0``, the first shipped map): the ring plus a dead
+#: end, the central island I4 ``Disc((1.0, 1.0), 0.2)`` reached only by the spur B4
+#: ``Box((0.95, 0.35), (1.05, 0.85))`` that leaves B0 at a T-junction. From I4 every goal lies
+#: behind the agent's back, so a policy must first walk away from it.
+SPUR_ISLANDS: tuple[Piece, ...] = (*RING_ISLANDS, Disc(center=(1.0, 1.0), radius=0.2))
+SPUR_BRIDGES: tuple[Piece, ...] = (*RING_BRIDGES, Box(lo=(0.95, 0.35), hi=(1.05, 0.85)))
+
+#: The default map, used when ``IslandsBridges`` gets no map: the v0 map (``SPUR_ISLANDS``).
+DEFAULT_ISLANDS: tuple[Piece, ...] = SPUR_ISLANDS
+#: The default map's bridges: the v0 map (``SPUR_BRIDGES``).
+DEFAULT_BRIDGES: tuple[Piece, ...] = SPUR_BRIDGES
 
 # Colours of the rgb_array rendering (thesis figure: red = current state, blue = goal).
 _SEA = np.array([205, 222, 235], dtype=np.uint8)
@@ -135,7 +143,8 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
       (``info["failure"]``).
     - Termination (success): ``d <= goal_eps`` with ``M(s_{t+1}) >= 0``
       (``info["is_success"]``).
-    - Truncation: 200 steps, by the ``TimeLimit`` of ``gym.make("ihm/IslandsBridges-v0")``.
+    - Truncation: 200 steps, by the ``TimeLimit`` of ``gym.make("ihm/IslandsBridges-v0")``
+      and ``gym.make("ihm/IslandsBridgesRing-v0")``.
 
     Every step's ``info`` has ``is_success``, ``failure``, ``distance_to_edge`` (``M(s_{t+1})``),
     ``distance_to_goal`` (``d``) and ``reward_goal``; reset's ``info`` has ``distance_to_edge``,
@@ -146,7 +155,7 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     - ``reward``: ``"dense"`` (default) or ``"sparse"``.
     - ``max_step``: step length per unit action component (default 0.1 map units), > 0.
     - ``goal_eps``: radius of the goal region (default 0.1), > 0.
-    - ``islands``: sequence of ``Disc``/``Box``; ``None`` is the default map's
+    - ``islands``: sequence of ``Disc``/``Box``; ``None`` is the default (v0) map's
       ``DEFAULT_ISLANDS``.
     - ``bridges``: sequence of ``Disc``/``Box``; ``None`` is ``DEFAULT_BRIDGES`` when
       ``islands`` is ``None`` as well, else no bridges.
@@ -156,18 +165,29 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Default Map
 
-    Four islands joined by four bridges 0.1 wide into a ring (see ``DEFAULT_ISLANDS``,
-    ``DEFAULT_BRIDGES`` and ``docs/islands_map.png``): I0 ``Disc((0.4, 0.4), 0.3)``, I1
-    ``Box((1.3, 0.15), (1.9, 0.65))``, I2 ``Disc((1.6, 1.55), 0.3)``, I3 ``Box((0.1, 1.2),
-    (0.7, 1.8))``; bridges B0 ``Box((0.6, 0.35), (1.35, 0.45))`` (I0-I1), B1 ``Box((1.55,
-    0.6), (1.65, 1.3))`` (I1-I2), B2 ``Box((0.35, 0.65), (0.45, 1.25))`` (I0-I3), B3
-    ``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2). ``SPUR_ISLANDS``/``SPUR_BRIDGES`` add a dead-end
-    island in the middle (registered as ``ihm/IslandsBridgesSpur-v0``).
+    Each map has its own Gymnasium id (``draw_map`` draws either):
+
+    - ``ihm/IslandsBridgesRing-v0``, the ring (``RING_ISLANDS``, ``RING_BRIDGES``): four islands
+      joined by four bridges 0.1 wide, I0 ``Disc((0.4, 0.4), 0.3)``, I1
+      ``Box((1.3, 0.15), (1.9, 0.65))``, I2 ``Disc((1.6, 1.55), 0.3)``, I3
+      ``Box((0.1, 1.2), (0.7, 1.8))``; bridges B0 ``Box((0.6, 0.35), (1.35, 0.45))`` (I0-I1),
+      B1 ``Box((1.55, 0.6), (1.65, 1.3))`` (I1-I2), B2 ``Box((0.35, 0.65), (0.45, 1.25))``
+      (I0-I3), B3 ``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2).
+    - ``ihm/IslandsBridges-v0``, the five-island map (``SPUR_ISLANDS``, ``SPUR_BRIDGES``; also
+      ``DEFAULT_ISLANDS``, ``DEFAULT_BRIDGES``, what ``IslandsBridges()`` builds): the ring
+      plus the dead-end island I4 ``Disc((1.0, 1.0), 0.2)`` in the middle, reached only by the
+      spur B4 ``Box((0.95, 0.35), (1.05, 0.85))`` that leaves B0 at a T-junction.
 
     ## Version History
 
-    - v0: initial version (thesis chapter 7). The default map was first the ring plus the
-      dead-end island that is now ``SPUR_ISLANDS``/``SPUR_BRIDGES``.
+    - ``ihm/IslandsBridges-v0``: initial version (thesis chapter 7), the five-island map with
+      the dead-end island I4 reached by the spur B4 (``SPUR_ISLANDS``, ``SPUR_BRIDGES``), the
+      first shipped map. For one release this id pointed at the ring by mistake.
+    - ``ihm/IslandsBridgesRing-v0``: the four-island ring (``RING_ISLANDS``,
+      ``RING_BRIDGES``), a map of its own (not a newer version of v0, so it has its own name
+      rather than ``-v1``, which Gymnasium would treat as superseding v0); dynamics, rewards
+      and the 200-step limit as in ``ihm/IslandsBridges-v0``. A change to either map will be
+      a new version of that id.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -374,16 +394,29 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return img
 
 
+def _map_title(islands: tuple[Piece, ...], bridges: tuple[Piece, ...]) -> str:
+    """Plot title naming the registered id whose map this is, else "custom map"."""
+    if (islands, bridges) == (SPUR_ISLANDS, SPUR_BRIDGES):
+        return "IslandsBridges-v0 map (five islands; bridges 0.1 wide)"
+    if (islands, bridges) == (RING_ISLANDS, RING_BRIDGES):
+        return "IslandsBridgesRing-v0 map (four-island ring; bridges 0.1 wide)"
+    return f"custom map ({len(islands)} islands, {len(bridges)} bridges)"
+
+
 def draw_map(
     path: str | Path,
     islands: Sequence[Piece] | None = None,
     bridges: Sequence[Piece] | None = None,
     start: ArrayLike | None = (0.35, 0.3),
     goal: ArrayLike | None = (1.65, 1.65),
+    title: str | None = None,
 ) -> Path:
-    """Draw a map (default: the default map) with labelled pieces to a PNG at ``path``.
+    """Draw a map (default: the v0 map, ``DEFAULT_ISLANDS``) with labelled pieces to a PNG.
 
-    ``start`` (red) and ``goal`` (blue) mark an example task; ``None`` leaves them out.
+    Pass ``RING_ISLANDS``, ``RING_BRIDGES`` for the ring. ``start`` (red) and ``goal``
+    (blue) mark an example task; ``None`` leaves them out. ``title`` defaults to the id of the
+    registered map the pieces are (``IslandsBridges-v0`` or ``IslandsBridgesRing-v0``), else
+    "custom map".
     Returns the path written. Used for ``docs/islands_map.png``.
     """
     import matplotlib
@@ -420,7 +453,7 @@ def draw_map(
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     ax.grid(True, alpha=0.3)
-    ax.set_title("IslandsBridges-v0 default map (bridges 0.1 wide)")
+    ax.set_title(_map_title(env.islands, env.bridges) if title is None else title)
     if start is not None or goal is not None:
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8)
     fig.tight_layout()

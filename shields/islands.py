@@ -17,14 +17,18 @@ Two shields are implemented:
 
 ``Psi_smart`` (:func:`smart_shield`)::
 
-    Psi_smart(a, s) = argmin_{a~ : M(s + k a~) >= 0, low <= a~ <= high} ||a~ - a||
+    Psi_smart(a, s) = argmin_{a~ : M(s + k a~) >= 0, low <= a~ <= high} ||a~ - clip(a)||
 
 for the affine dynamics of the islands world, ``predict(s, a) = s + k clip(a, low, high)``
-(``k`` is the env's ``action_scale``, the step length per unit action). With the target point
-``q = s + k a`` and the reachable box ``R = [s + k low, s + k high]`` the problem is the
-Euclidean projection of ``q`` onto ``(union_i P_i) ∩ R`` (``||a~ - a|| = ||p - q|| / k`` for
-``p = s + k a~``), and because the safe region is a union of convex pieces ``P_i`` (discs and
-axis-aligned boxes) it splits into one convex projection per piece::
+(``k`` is the env's ``action_scale``, the step length per unit action;
+``clip(a) = clip(a, low, high)`` componentwise). The shield answers for the step the env would
+take: it first clips the agent's action to the action box, as the env does, and works with
+``clip(a)`` from then on. A safe ``clip(a)`` is returned as it is (clipping alone is not an
+intervention); otherwise, with the target point ``q = s + k clip(a)`` and the reachable box
+``R = [s + k low, s + k high]``, the problem is the Euclidean projection of ``q`` onto
+``(union_i P_i) ∩ R`` (``||a~ - clip(a)|| = ||p - q|| / k`` for ``p = s + k a~``), and because
+the safe region is a union of convex pieces ``P_i`` (discs and axis-aligned boxes) it splits
+into one convex projection per piece::
 
     p* = argmin_i ||proj_{P_i ∩ R}(q) - q||,      a~ = (p* - s) / k
 
@@ -86,6 +90,9 @@ def simple_shield(
     Returns:
         ``(executed_action, intervened)``: the action itself (float64, same values) when safe,
         the zero action (a zero step) otherwise.
+
+    The action is used as given; :class:`shields.SimpleShield` passes the agent's action
+    clipped to the action box, so that the executed action is the step the env takes.
     """
     s = np.asarray(state, dtype=np.float64)
     a = np.array(action, dtype=np.float64)
@@ -288,28 +295,31 @@ def smart_shield(
     low: ArrayLike = -1.0,
     high: ArrayLike = 1.0,
 ) -> tuple[NDArray[np.float64], bool]:
-    """Thesis ``Psi_smart``: the safe action nearest to the agent's action (exact).
+    """Thesis ``Psi_smart``: the safe action nearest to the (clipped) agent action (exact).
 
-    ``Psi_smart(a, s) = argmin ||a~ - a||  s.t.  M(s + k a~) >= 0,  low <= a~ <= high``,
+    ``Psi_smart(a, s) = argmin ||a~ - clip(a)||  s.t.  M(s + k a~) >= 0,  low <= a~ <= high``,
 
     for the affine model ``predict(s, a) = s + k clip(a, low, high)`` and the safe region
-    ``union(pieces)`` (``M`` = :func:`envs.geometry.signed_distance`). If ``a`` is already safe
-    (``M(s + k clip(a, low, high)) >= 0``) it is returned unchanged (same values, float64).
-    Otherwise the target ``q = s + k a`` is projected exactly onto
+    ``union(pieces)`` (``M`` = :func:`envs.geometry.signed_distance`). The shield answers for
+    the step the env would take, so ``a`` is first clipped componentwise to ``[low, high]`` and
+    everything below uses ``c = clip(a, low, high)``. If ``c`` is safe (``M(s + k c) >= 0``) it
+    is returned as it is (float64) with ``intervened=False``: clipping alone is not an
+    intervention. Otherwise the target ``q = s + k c`` is projected exactly onto
     ``union_i (shrink(P_i) ∩ [s + k low, s + k high])`` (one closed-form convex projection per
     piece, pieces shrunk by ``MARGIN_REL * (1 + max|s| + k)``) and ``a~ = (p* - s) / k``.
 
     Args:
         state: current state ``s`` (2,).
-        action: agent action ``a`` (2,).
+        action: agent action ``a`` (2,), possibly outside ``[low, high]``.
         pieces: convex pieces (``Disc``/``Box``) whose union is the safe region.
         scale: ``k > 0``, step length per unit action.
         low, high: action bounds (scalars or (2,)).
 
     Returns:
-        ``(executed_action, intervened)``. If no safe action exists (no piece meets the
-        reachable box, e.g. ``s`` is far outside the region), the zero action with
-        ``intervened=True``.
+        ``(executed_action, intervened)``: ``clip(a)`` or its nearest safe action, both inside
+        ``[low, high]``; ``intervened`` is ``True`` only when safety changed the in-box action
+        ``clip(a)``. If no safe action exists (no piece meets the reachable box, e.g. ``s`` is
+        far outside the region), the zero action with ``intervened=True``.
     """
     s = np.asarray(state, dtype=np.float64)
     a = np.array(action, dtype=np.float64)
@@ -320,15 +330,17 @@ def smart_shield(
         raise ValueError(f"scale must be > 0, got {scale}")
     lo, hi = _bounds2(low), _bounds2(high)
     sx, sy = float(s[0]), float(s[1])
-    ax, ay = float(a[0]), float(a[1])
     length = 1.0 + max(abs(sx), abs(sy)) + k
-    # 0. already safe? (same arithmetic as the env: s + k * clip(a))
-    cx, cy = min(max(ax, lo[0]), hi[0]), min(max(ay, lo[1]), hi[1])
+    # 0. clip to the action box, as the env does: from here on only clip(a) counts
+    cx = min(max(float(a[0]), lo[0]), hi[0])
+    cy = min(max(float(a[1]), lo[1]), hi[1])
+    # 1. already safe? (same arithmetic as the env: s + k * clip(a)); not an intervention
     if _is_safe(pieces, sx + k * cx, sy + k * cy):
-        return a, False
+        return np.array([cx, cy]), False
+    # 2. project the target of the clipped action onto the safe pieces ∩ the reachable box
     rl = (sx + k * lo[0], sy + k * lo[1])
     rh = (sx + k * hi[0], sy + k * hi[1])
-    qx, qy = sx + k * ax, sy + k * ay
+    qx, qy = sx + k * cx, sy + k * cy
     for margin_rel in (MARGIN_REL, 1e3 * MARGIN_REL):
         res = _project_union(pieces, margin_rel * length, rl, rh, qx, qy)
         if res is None:

@@ -1,12 +1,18 @@
 """Gymnasium wrappers that put a shield between the agent and the env (thesis Fig. "Shield RL").
 
-Every action the agent sends through :meth:`step` goes through the shield
-``a~_t = Psi(a_t, s_t)`` (thesis eq. shield) before it reaches the inner env; the inner env
-receives ``a~_t``. Each step's ``info`` carries
+Every action the agent sends through :meth:`step` is first clipped to the env's Box action
+space, ``clip(a_t) = clip(a_t, low, high)`` (what the env would do with it anyway), and then
+goes through the shield ``a~_t = Psi(clip(a_t), s_t)`` (thesis eq. shield) before it reaches the
+inner env; the inner env receives ``a~_t``, which lies in the action box, so it applies it as it
+is. The shield thus answers for the step the env would actually take. Each step's ``info``
+carries
 
-- ``agent_action``: ``a_t`` as the agent sent it (float64 copy),
-- ``executed_action``: ``a~_t``, what the inner env received (float64),
-- ``shield_intervened``: ``True`` when the shield changed the action.
+- ``agent_action``: ``a_t`` as the agent sent it (float64 copy, not clipped),
+- ``executed_action``: ``a~_t``, what the inner env received and applied (float64): the step
+  actually taken, always inside the action box,
+- ``shield_intervened``: ``True`` when the shield changed the in-box action ``clip(a_t)`` for
+  safety; clipping alone is not an intervention (a safe out-of-box action is executed as its
+  clipped value with ``shield_intervened=False``).
 
 The executed action is passed on in float64 (not cast to the action space's float32) so that the
 smart shield's exact projection is not perturbed by a float32 rounding of ~1e-8.
@@ -55,15 +61,20 @@ class _ShieldWrapper(gym.Wrapper):
                 f"{type(self).__name__} needs env.unwrapped to expose {list(self._required)}; "
                 f"{type(env.unwrapped).__name__} lacks {missing}"
             )
+        #: The action box ``[low, high]`` (float64) that agent actions are clipped to.
+        self._low = np.asarray(env.action_space.low, dtype=np.float64)
+        self._high = np.asarray(env.action_space.high, dtype=np.float64)
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
-        """``(a~, intervened)`` for the agent's action in the current state."""
+        """``(a~, intervened)`` for an in-box action ``clip(a)`` in the current state."""
         raise NotImplementedError
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        """Shield the action, step the inner env with it, record both in ``info``."""
+        """Clip the action to the action box, shield it, step the inner env with the result,
+        record the agent's and the executed action in ``info``."""
         agent_action = np.array(action, dtype=np.float64)
-        executed, intervened = self.shield(agent_action.copy())
+        clipped = np.clip(agent_action, self._low, self._high)
+        executed, intervened = self.shield(clipped)
         obs, reward, terminated, truncated, info = self.env.step(executed)
         info = dict(info)
         info["agent_action"] = agent_action
@@ -73,7 +84,8 @@ class _ShieldWrapper(gym.Wrapper):
 
 
 class SimpleShield(_ShieldWrapper):
-    """Thesis ``Psi_simple``: ``a~ = a if M(predict(s, a)) >= 0 else 0`` (a zero step).
+    """Thesis ``Psi_simple`` on the clipped action: ``a~ = clip(a) if M(predict(s, clip(a)))
+    >= 0 else 0`` (a zero step).
 
     Works for any Box action space whose env exposes ``state``, ``predict`` and
     ``safe_distance`` on ``env.unwrapped``; raises ``TypeError`` otherwise.
@@ -88,8 +100,9 @@ class SimpleShield(_ShieldWrapper):
 
 
 class SmartShield(_ShieldWrapper):
-    """Thesis ``Psi_smart``: ``a~ = argmin ||a~ - a|| s.t. M(s + k a~) >= 0, a~ in the action
-    box`` -- the nearest safe action, computed exactly (:func:`shields.islands.smart_shield`).
+    """Thesis ``Psi_smart``: ``a~ = argmin ||a~ - clip(a)|| s.t. M(s + k a~) >= 0, a~ in the
+    action box`` -- the safe action nearest to the clipped one, computed exactly
+    (:func:`shields.islands.smart_shield`).
 
     Needs a 2D Box action space and ``state``, ``predict``, ``safe_distance``, ``safe_pieces``,
     ``action_scale`` on ``env.unwrapped`` (affine model ``predict(s, a) = s + k clip(a)``);
@@ -104,8 +117,6 @@ class SmartShield(_ShieldWrapper):
             raise TypeError(
                 f"SmartShield needs a 2D Box action space, got shape {env.action_space.shape}"
             )
-        self._low = np.asarray(env.action_space.low, dtype=np.float64)
-        self._high = np.asarray(env.action_space.high, dtype=np.float64)
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
         """See :func:`shields.islands.smart_shield`."""

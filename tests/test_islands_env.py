@@ -15,12 +15,18 @@ from envs import Box, Disc, IslandsBridges
 from envs.islands_bridges import (
     DEFAULT_BRIDGES,
     DEFAULT_ISLANDS,
+    RING_BRIDGES,
+    RING_ISLANDS,
     SPUR_BRIDGES,
     SPUR_ISLANDS,
+    _map_title,
     draw_map,
 )
 
-ENV_ID = "ihm/IslandsBridges-v0"
+ENV_ID = "ihm/IslandsBridges-v0"  # the five-island map with the dead-end island I4
+RING_ID = "ihm/IslandsBridgesRing-v0"  # the four-island ring
+#: (id, islands, bridges) of every registered map
+MAPS = ((ENV_ID, SPUR_ISLANDS, SPUR_BRIDGES), (RING_ID, RING_ISLANDS, RING_BRIDGES))
 
 
 def _no_warnings(fn, *args, **kwargs) -> None:
@@ -30,12 +36,13 @@ def _no_warnings(fn, *args, **kwargs) -> None:
     assert not caught, [f"{w.category.__name__}: {w.message}" for w in caught]
 
 
+@pytest.mark.parametrize("env_id", [ENV_ID, RING_ID])
 @pytest.mark.parametrize("reward", ["dense", "sparse"])
-def test_gymnasium_check_env_no_warnings(reward):
+def test_gymnasium_check_env_no_warnings(reward, env_id):
     # through gym.make so that the checker also tests the render modes via env.spec
-    env = gym.make(ENV_ID, reward=reward).unwrapped
+    env = gym.make(env_id, reward=reward).unwrapped
     _no_warnings(gym_check_env, env)
-    env = gym.make(ENV_ID, reward=reward, render_mode="rgb_array").unwrapped
+    env = gym.make(env_id, reward=reward, render_mode="rgb_array").unwrapped
     _no_warnings(gym_check_env, env)
 
 
@@ -126,6 +133,7 @@ def test_dense_reward_is_minus_distance_and_sparse_zero_while_walking():
 
 
 def test_action_clipped_and_predict():
+    # (1.0, 0.4) is on B0 (and, on the v0 map, where the spur B4 leaves it): 0.05 from the edge
     env = _env_at((1.0, 0.4), (1.6, 1.55), max_step=0.05)
     assert env.action_scale == 0.05
     np.testing.assert_allclose(env.predict([1.0, 0.4], [3.0, -0.5]), [1.05, 0.375])
@@ -143,8 +151,9 @@ def test_sparse_goal_within_eps_but_off_map_is_failure():
     assert term and info["failure"] and not info["is_success"] and r == 0.0
 
 
-def test_start_and_goal_on_different_islands_in_safe_region():
-    env = IslandsBridges()
+@pytest.mark.parametrize(("env_id", "islands", "bridges"), MAPS)
+def test_start_and_goal_on_different_islands_in_safe_region(env_id, islands, bridges):
+    env = gym.make(env_id).unwrapped
     seen = set()
     for seed in range(300):
         obs, info = env.reset(seed=seed)
@@ -152,13 +161,13 @@ def test_start_and_goal_on_different_islands_in_safe_region():
         assert env.safe_distance(env.state) >= 0 and env.safe_distance(env.goal) >= 0
         i, j = info["start_island"], info["goal_island"]
         assert i >= 0 and j >= 0 and i != j
-        assert DEFAULT_ISLANDS[i].signed_distance(env.state) >= 0
-        assert DEFAULT_ISLANDS[j].signed_distance(env.goal) >= 0
+        assert islands[i].signed_distance(env.state) >= 0
+        assert islands[j].signed_distance(env.goal) >= 0
         assert np.linalg.norm(env.state - env.goal) > env.goal_eps
         np.testing.assert_allclose(s, env.state, atol=1e-6)
         np.testing.assert_allclose(g, env.goal, atol=1e-6)
         seen.add(i)
-    assert seen == set(range(len(DEFAULT_ISLANDS)))
+    assert seen == set(range(len(islands)))
 
 
 def test_same_island_allowed_when_asked():
@@ -171,26 +180,35 @@ def test_same_island_allowed_when_asked():
     assert same > 0
 
 
-def test_default_map_is_fixed():
-    assert DEFAULT_ISLANDS == (
+def test_maps_are_fixed():
+    ring_islands = (
         Disc(center=(0.4, 0.4), radius=0.3),
         Box(lo=(1.3, 0.15), hi=(1.9, 0.65)),
         Disc(center=(1.6, 1.55), radius=0.3),
         Box(lo=(0.1, 1.2), hi=(0.7, 1.8)),
     )
-    assert DEFAULT_BRIDGES == (
+    ring_bridges = (
         Box(lo=(0.6, 0.35), hi=(1.35, 0.45)),
         Box(lo=(1.55, 0.6), hi=(1.65, 1.3)),
         Box(lo=(0.35, 0.65), hi=(0.45, 1.25)),
         Box(lo=(0.65, 1.5), hi=(1.35, 1.6)),
     )
+    # the four-island ring
+    assert RING_ISLANDS == ring_islands and RING_BRIDGES == ring_bridges
+    # v0 (the first shipped map): the ring plus the dead-end island I4 and its spur B4
+    assert SPUR_ISLANDS == (*ring_islands, Disc(center=(1.0, 1.0), radius=0.2))
+    assert SPUR_BRIDGES == (*ring_bridges, Box(lo=(0.95, 0.35), hi=(1.05, 0.85)))
+    # the default map is the v0 map: IslandsBridges() is gym.make("ihm/IslandsBridges-v0")
+    assert DEFAULT_ISLANDS == SPUR_ISLANDS and DEFAULT_BRIDGES == SPUR_BRIDGES
     env = IslandsBridges()
-    assert env.islands == DEFAULT_ISLANDS and env.bridges == DEFAULT_BRIDGES
-    # the spur map is the ring plus one dead-end island and its bridge
-    assert SPUR_ISLANDS[:4] == DEFAULT_ISLANDS and SPUR_BRIDGES[:4] == DEFAULT_BRIDGES
-    assert SPUR_ISLANDS[4:] == (Disc(center=(1.0, 1.0), radius=0.2),)
-    assert SPUR_BRIDGES[4:] == (Box(lo=(0.95, 0.35), hi=(1.05, 0.85)),)
-    for islands, bridges in ((DEFAULT_ISLANDS, DEFAULT_BRIDGES), (SPUR_ISLANDS, SPUR_BRIDGES)):
+    assert env.islands == SPUR_ISLANDS and env.bridges == SPUR_BRIDGES
+    v0 = gym.make(ENV_ID).unwrapped
+    assert (v0.islands, v0.bridges) == (env.islands, env.bridges)
+    for attr in ("reward_mode", "max_step", "goal_eps", "different_islands", "action_scale"):
+        assert getattr(v0, attr) == getattr(env, attr)
+    assert v0.observation_space == env.observation_space
+    assert v0.action_space == env.action_space
+    for islands, bridges in ((RING_ISLANDS, RING_BRIDGES), (SPUR_ISLANDS, SPUR_BRIDGES)):
         for b in bridges:  # bridges are narrow
             lo, hi = b.bounds()
             assert min(hi - lo) == pytest.approx(0.1)
@@ -205,17 +223,35 @@ def test_default_map_is_fixed():
     for k, isl in enumerate(SPUR_ISLANDS):
         touching = sum(_overlap(isl, b) for b in SPUR_BRIDGES)
         assert touching == (1 if k == 4 else 2)  # B4 touches I4 and B0 only
-    # the documentation names the same coordinates
-    assert "Disc((1.6, 1.55), 0.3)" in IslandsBridges.__doc__
-    assert "``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2)" in IslandsBridges.__doc__
+    # the ring: each island touches exactly two bridges
+    for isl in RING_ISLANDS:
+        assert sum(_overlap(isl, b) for b in RING_BRIDGES) == 2
+    # the documentation names the same coordinates and both ids
+    doc = IslandsBridges.__doc__
+    assert "Disc((1.6, 1.55), 0.3)" in doc
+    assert "``Box((0.65, 1.5), (1.35, 1.6))`` (I3-I2)" in doc
+    assert "I4 ``Disc((1.0, 1.0), 0.2)``" in doc
+    assert "B4 ``Box((0.95, 0.35), (1.05, 0.85))``" in doc
+    assert ENV_ID in doc and RING_ID in doc
 
 
-def test_spur_map_is_registered():
-    env = gym.make("ihm/IslandsBridgesSpur-v0", reward="sparse")
-    assert env.unwrapped.islands == SPUR_ISLANDS and env.unwrapped.bridges == SPUR_BRIDGES
-    assert env.unwrapped.reward_mode == "sparse" and env.spec.max_episode_steps == 200
-    assert env.unwrapped.safe_distance((1.0, 1.0)) == pytest.approx(0.2)  # centre of I4
-    assert gym.make(ENV_ID).unwrapped.safe_distance((1.0, 1.0)) < 0  # sea on the ring map
+def test_map_ids_are_registered():
+    # one id per map: v0 the five-island map, Ring-v0 the ring; the old spur id is gone
+    for env_id, islands, bridges in MAPS:
+        env = gym.make(env_id, reward="sparse")
+        assert env.unwrapped.islands == islands and env.unwrapped.bridges == bridges
+        assert env.unwrapped.reward_mode == "sparse" and env.spec.max_episode_steps == 200
+        assert gym.spec(env_id).kwargs == {"islands": islands, "bridges": bridges}
+    assert "ihm/IslandsBridgesSpur-v0" not in gym.registry
+    with pytest.raises(gym.error.Error):
+        gym.make("ihm/IslandsBridgesSpur-v0")
+    ids = sorted(i for i in gym.registry if i.startswith("ihm/IslandsBridges"))
+    assert ids == [ENV_ID, RING_ID]
+    assert gym.make(ENV_ID).unwrapped.safe_distance((1.0, 1.0)) == pytest.approx(0.2)  # I4
+    assert gym.make(RING_ID).unwrapped.safe_distance((1.0, 1.0)) < 0  # sea inside the ring
+    # separate names, no "-v1": Gymnasium does not flag v0 as out of date
+    for env_id, _, _ in MAPS:
+        _no_warnings(gym.make, env_id)
 
 
 def _overlap(p, q) -> bool:
@@ -238,7 +274,7 @@ def test_custom_map():
 
 
 def test_render_shows_agent_and_goal():
-    env = IslandsBridges(render_mode="rgb_array")
+    env = IslandsBridges(islands=RING_ISLANDS, bridges=RING_BRIDGES, render_mode="rgb_array")
     env.reset(seed=0, options={"start": (0.4, 0.4), "goal": (1.6, 1.55)})
     img = env.render()
     lo, hi, w, h, ppu = env._frame()
@@ -261,11 +297,26 @@ def test_render_shows_agent_and_goal():
     )
     with pytest.warns(UserWarning, match="render_mode=None"):
         assert IslandsBridges().render() is None
+    # the default (v0) map has land in the ring's middle: the dead-end island I4
+    env = IslandsBridges(render_mode="rgb_array")
+    env.reset(seed=0, options={"start": (0.4, 0.4), "goal": (1.6, 1.55)})
+    lo2, hi2, _, _, ppu2 = env._frame()
+    assert np.array_equal(lo2, lo) and np.array_equal(hi2, hi) and ppu2 == ppu  # same frame
+    img = env.render()  # pixel() reads the new image
+    assert pixel(1.0, 1.0) == (236, 216, 165)  # land (I4)
+    assert pixel(0.8, 0.6) == (205, 222, 235)  # sea
 
 
 def test_draw_map(tmp_path):
-    out = draw_map(tmp_path / "map.png")
-    assert out.exists() and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    png = b"\x89PNG\r\n\x1a\n"
+    out = draw_map(tmp_path / "map.png")  # the default, v0 map
+    assert out.exists() and out.read_bytes()[:8] == png
+    out = draw_map(tmp_path / "ring.png", RING_ISLANDS, RING_BRIDGES, title="ring", goal=None)
+    assert out.exists() and out.read_bytes()[:8] == png
+    # the default title names the map's id
+    assert _map_title(SPUR_ISLANDS, SPUR_BRIDGES).startswith("IslandsBridges-v0 map")
+    assert _map_title(RING_ISLANDS, RING_BRIDGES).startswith("IslandsBridgesRing-v0 map")
+    assert _map_title(RING_ISLANDS, ()).startswith("custom map")
 
 
 @pytest.mark.parametrize(
@@ -295,9 +346,10 @@ def test_bad_reset_options_and_pieces():
         IslandsBridges().step(np.zeros(2))
 
 
-def test_gym_make_registration_and_time_limit():
-    assert set(envs.__all__) >= {"IslandsBridges", "Disc", "Box"}
-    env = gym.make(ENV_ID, reward="sparse")
+@pytest.mark.parametrize("env_id", [ENV_ID, RING_ID])
+def test_gym_make_registration_and_time_limit(env_id):
+    assert set(envs.__all__) >= {"IslandsBridges", "Disc", "Box", "RING_ISLANDS", "SPUR_ISLANDS"}
+    env = gym.make(env_id, reward="sparse")
     assert env.spec.max_episode_steps == 200
     assert isinstance(env.unwrapped, IslandsBridges) and env.unwrapped.reward_mode == "sparse"
     env.reset(seed=0, options={"start": (0.4, 0.4), "goal": (1.6, 1.55)})

@@ -1,7 +1,8 @@
 """Shields (thesis Psi_simple, Psi_smart): safety, exactness against brute force, wrappers.
 
 The core tests use a small fake env built on :mod:`envs.geometry` so that they do not depend on
-the islands env; one test at the end wraps the real ``ihm/IslandsBridges-v0``.
+the islands env; the tests at the end wrap the real ``ihm/IslandsBridges-v0`` and
+``ihm/IslandsBridgesRing-v0``.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ def test_smart_shield_next_state_always_safe_and_safe_actions_unchanged(scale):
         a_t, intervened = smart_shield(s, a, PIECES, scale)
         assert intervened == (not was_safe)
         if was_safe:
-            np.testing.assert_array_equal(a_t, a)  # exactly unchanged
+            np.testing.assert_array_equal(a_t, np.clip(a, -1, 1))  # the env's step, unchanged
         else:
             assert np.all(np.abs(a_t) <= 1.0)
             n_intervened += 1
@@ -82,35 +83,78 @@ def test_smart_shield_next_state_always_safe_and_safe_actions_unchanged(scale):
     [(0.3, 1.0), (0.1, 3.0)],  # the second: targets beyond the action box, whose edges bind
 )
 def test_smart_shield_is_optimal_against_brute_force_grid(scale, a_max):
-    """``||a~ - a||`` matches the best safe action on a 401x401 grid of [-1, 1]^2, from both
-    sides: never worse than the grid (the grid's safe points are feasible, so the exact
+    """``||a~ - clip(a)||`` matches the best safe action on a 401x401 grid of [-1, 1]^2, from
+    both sides: never worse than the grid (the grid's safe points are feasible, so the exact
     minimum is <= theirs), never better by more than one grid cell diagonal (the safe points
-    nearest to the optimum, which must lie inside the region, are at most that far away)."""
+    nearest to the optimum, which must lie inside the region, are at most that far away).
+    The target is the clipped action: the shield answers for the step the env would take."""
     rng = np.random.default_rng(1)
     ticks = np.linspace(-1.0, 1.0, 401)
     step = ticks[1] - ticks[0]
     grid = np.stack(np.meshgrid(ticks, ticks, indexing="ij"), axis=-1).reshape(-1, 2)
     states = safe_states(rng, 600)
-    checked = 0
+    checked = out_of_box = 0
     for s in states:
         a = rng.uniform(-a_max, a_max, size=2)
         if signed_distance(PIECES, predict(s, a, scale)) >= 0:
             continue
+        c = np.clip(a, -1.0, 1.0)
         a_t, intervened = smart_shield(s, a, PIECES, scale)
         assert intervened
-        smart = np.linalg.norm(a_t - a)
-        # brute force over the grid points within smart + 3 steps of a (a cheaper but equal
-        # minimum whenever brute <= smart + 3 steps; otherwise brute = inf fails below)
-        dist = np.linalg.norm(grid - a, axis=1)
+        assert np.all(np.abs(a_t) <= 1.0)
+        smart = np.linalg.norm(a_t - c)
+        # brute force over the grid points within smart + 3 steps of clip(a) (a cheaper but
+        # equal minimum whenever brute <= smart + 3 steps; otherwise brute = inf fails below)
+        dist = np.linalg.norm(grid - c, axis=1)
         near = dist <= smart + 3 * step
         ok = signed_distance(PIECES, s + scale * grid[near]) >= 0
         brute = dist[near][ok].min() if ok.any() else np.inf
         assert smart <= brute + 1e-6, (s, a, smart, brute)
         assert smart >= brute - step * np.sqrt(2), (s, a, smart, brute)
+        out_of_box += bool(np.any(np.abs(a) > 1.0))
         checked += 1
         if checked == 150:
             break
     assert checked == 150
+    assert (out_of_box > 100) == (a_max > 1.0)  # a_max = 3: mostly out-of-box actions
+
+
+def test_smart_shield_safe_out_of_box_action_is_clipped_not_intervened():
+    s = np.array([1.3, 0.0])  # deep inside the box island [1.0, 1.6] x [-0.3, 0.3]
+    a_t, intervened = smart_shield(s, [3.0, 0.0], PIECES, 0.1)
+    assert not intervened  # clipping alone is not an intervention
+    assert a_t.dtype == np.float64
+    np.testing.assert_array_equal(a_t, [1.0, 0.0])  # exactly the env's clipped step
+    a_t, intervened = smart_shield(s, [-2.0, 0.5], PIECES, 0.1, low=[-0.5, -1], high=[1, 0.2])
+    assert not intervened
+    np.testing.assert_array_equal(a_t, [-0.5, 0.2])
+
+
+def test_smart_shield_projects_the_clipped_action_not_the_raw_one():
+    """From inside the big disc, ``a = (-0.2, 3)``: ``clip(a) = (-0.2, 1)`` leaves the disc to
+    the north, and its nearest safe action slides along the disc's rim. Projecting the raw
+    target ``s + k a`` instead would jump to the vertical bridge's corner ``(0.5, 1)``, which
+    is much farther from the step the env would take."""
+    s, k, a = np.array([0.3, 0.3]), 0.3, np.array([-0.2, 3.0])
+    c = np.clip(a, -1.0, 1.0)
+    assert signed_distance(PIECES, s + k * c) < 0
+    a_t, intervened = smart_shield(s, a, PIECES, k)
+    assert intervened
+    # what projecting the unclipped target would give
+    raw = (project_union_box(PIECES, s - k, s + k, s + k * a) - s) / k
+    np.testing.assert_allclose(raw, [0.5, 1.0], atol=1e-12)
+    assert np.linalg.norm(a_t - raw) > 0.5
+    # the exact answer: q = s + k clip(a) projected radially onto the disc |p| <= 0.5
+    q = s + k * c
+    np.testing.assert_allclose(a_t, (0.5 * q / np.linalg.norm(q) - s) / k, atol=1e-8)
+    # ... and no safe action on a fine grid of the action box is nearer to clip(a)
+    ticks = np.linspace(-1.0, 1.0, 801)
+    step = ticks[1] - ticks[0]
+    grid = np.stack(np.meshgrid(ticks, ticks, indexing="ij"), axis=-1).reshape(-1, 2)
+    brute = np.linalg.norm(grid - c, axis=1)[signed_distance(PIECES, s + k * grid) >= 0].min()
+    smart = np.linalg.norm(a_t - c)
+    assert brute - step * np.sqrt(2) <= smart <= brute + 1e-9
+    assert smart < np.linalg.norm(raw - c) - 0.2
 
 
 def test_smart_shield_no_safe_action_gives_zero_step():
@@ -125,8 +169,8 @@ def test_smart_shield_respects_action_bounds():
     for s in safe_states(rng, 300):
         a = rng.uniform(-1, 1, size=2)
         a_t, intervened = smart_shield(s, a, PIECES, 0.3, low=[-0.5, -0.2], high=[0.4, 0.6])
-        if not intervened:  # safe after the env's clip: returned unchanged
-            np.testing.assert_array_equal(a_t, a)
+        if not intervened:  # safe after the clip: returned clipped, as the env would step
+            np.testing.assert_array_equal(a_t, np.clip(a, [-0.5, -0.2], [0.4, 0.6]))
             continue
         assert np.all(a_t >= [-0.5, -0.2]) and np.all(a_t <= [0.4, 0.6])
         nxt = s + 0.3 * np.clip(a_t, [-0.5, -0.2], [0.4, 0.6])
@@ -323,11 +367,54 @@ def test_smart_wrapper_rejects_missing_pieces_and_non_2d_actions():
 
 
 @pytest.mark.parametrize("wrapper", [SimpleShield, SmartShield])
-def test_shield_around_real_islands_env_never_fails(wrapper):
+def test_wrapper_clips_out_of_box_actions_before_shielding(wrapper):
+    """A safe action outside the box runs as its clipped value, not as an intervention."""
+    env = wrapper(FakeIslands(scale=0.1))
+    env.reset()
+    env.unwrapped.state = np.array([1.3, 0.0])  # deep inside the box island
+    _, _, _, _, info = env.step(np.array([3.0, -0.5]))
+    assert not info["shield_intervened"]
+    np.testing.assert_array_equal(info["agent_action"], [3.0, -0.5])
+    np.testing.assert_array_equal(info["executed_action"], [1.0, -0.5])
+    np.testing.assert_array_equal(env.unwrapped.received[-1], [1.0, -0.5])
+
+
+@pytest.mark.parametrize("wrapper", [SimpleShield, SmartShield])
+def test_wrapper_executed_action_is_the_step_the_real_env_took(wrapper):
+    """On ``ihm/IslandsBridgesRing-v0`` with actions up to 3 in size: ``executed_action`` is in the
+    action box and is exactly the step taken, ``(s_{t+1} - s_t) / action_scale``."""
+    pytest.importorskip("envs")
+    env = wrapper(gym.make("ihm/IslandsBridgesRing-v0"))
+    u = env.unwrapped
+    rng = np.random.default_rng(8)
+    env.reset(seed=0)
+    n_out = n_intervened = 0
+    for _ in range(600):
+        a = rng.uniform(-3.0, 3.0, size=2).astype(np.float32)
+        before = u.state.copy()
+        _, _, terminated, truncated, info = env.step(a)
+        after = u.state.copy()
+        executed = info["executed_action"]
+        np.testing.assert_array_equal(info["agent_action"], a.astype(np.float64))
+        assert executed.dtype == np.float64 and np.all(np.abs(executed) <= 1.0)
+        np.testing.assert_allclose(executed, (after - before) / u.action_scale, rtol=0, atol=1e-12)
+        if not info["shield_intervened"]:
+            np.testing.assert_array_equal(executed, np.clip(a.astype(np.float64), -1.0, 1.0))
+        assert not info["failure"]
+        n_out += bool(np.any(np.abs(a) > 1.0))
+        n_intervened += info["shield_intervened"]
+        if terminated or truncated:
+            env.reset()
+    assert n_out > 400 and n_intervened > 10
+
+
+@pytest.mark.parametrize("env_id", ["ihm/IslandsBridges-v0", "ihm/IslandsBridgesRing-v0"])
+@pytest.mark.parametrize("wrapper", [SimpleShield, SmartShield])
+def test_shield_around_real_islands_env_never_fails(wrapper, env_id):
     envs = pytest.importorskip("envs")
     if not hasattr(envs, "IslandsBridges"):
         pytest.skip("envs.IslandsBridges not available")
-    env = wrapper(gym.make("ihm/IslandsBridges-v0", max_step=0.2))
+    env = wrapper(gym.make(env_id, max_step=0.2))
     rng = np.random.default_rng(6)
     env.reset(seed=0)
     env.action_space.seed(0)

@@ -15,10 +15,14 @@ A run directory holds::
     vecnormalize.pkl    VecNormalize statistics (--normalize, the default; reloaded by --resume)
 
 The evaluation runs the deterministic policy with the shield kept in place
-(as the thesis does) and reports the success rate over ``--eval-episodes``
-episodes. ``--resume RUN_DIR`` loads ``model.zip`` and ``config.json``,
-trains ``--total-steps`` more steps (appending to the monitor logs) and
-rewrites ``eval.json``.
+and reports the success rate over ``--eval-episodes`` episodes, on the
+*validation* environments of the run (:mod:`train.seeding`: every run seed
+has its own independent streams for training, validation and held-out test
+environments; the benchmark ``train.islands`` scores on the test streams,
+which this script never draws from). ``--resume RUN_DIR`` loads ``model.zip``
+and ``config.json``, trains ``--total-steps`` more steps (appending to the
+monitor logs, with fresh streams for the new segment) and rewrites
+``eval.json``.
 
 Examples::
 
@@ -51,7 +55,8 @@ from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from tqdm import tqdm
 
-import envs  # noqa: F401  (registers ihm/IslandsBridges-v0)
+import envs  # noqa: F401  (registers ihm/IslandsBridges-v0 and -v1)
+from train.seeding import EnvSeeds, RunSeeds
 
 __all__ = [
     "SHIELDS",
@@ -63,7 +68,9 @@ __all__ = [
     "evaluate",
     "main",
     "make_env",
+    "make_eval_envs",
     "make_vec_env",
+    "normalizer",
     "parse_config",
     "run_name",
     "seed_everything",
@@ -85,11 +92,19 @@ def opt(default: Any, help: str, **kw: Any) -> Any:
 class Config:
     """Everything a training run depends on; saved as config.json."""
 
-    env_id: str = opt("ihm/IslandsBridges-v0", "Gymnasium id of the environment")
+    env_id: str = opt(
+        "ihm/IslandsBridges-v0",
+        "Gymnasium id of the environment (islands: -v0 the five-island map with a dead end, "
+        "-v1 the four-island ring)",
+    )
     shield: str = opt("none", "shield around the env (kept for evaluation)", choices=SHIELDS)
     reward: str = opt("dense", "reward mode passed to the env as reward=...", choices=REWARDS)
     total_steps: int = opt(200_000, "env steps to train (with --resume: steps to add)")
-    seed: int = opt(1, "seed of python, numpy, torch, env resets and action spaces")
+    seed: int = opt(
+        1,
+        "run seed (>= 0): root of independent streams for training, validation and test envs "
+        "and for python/numpy/torch (train.seeding)",
+    )
     n_envs: int = opt(8, "parallel training envs (one Monitor CSV each)")
     subproc: bool = opt(False, "run the training envs in subprocesses (SubprocVecEnv)")
     pi: list[int] = opt([64, 64], "hidden layer sizes of the policy net")
@@ -176,6 +191,8 @@ def parse_config(argv: Sequence[str] | None = None) -> Config:
         if getattr(cfg, name) < 1
     ]
     problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
+    if cfg.seed < 0:
+        problems.append("--seed must be >= 0")
     if cfg.eval_episodes < 0:
         problems.append("--eval-episodes must be >= 0")
     if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
@@ -196,65 +213,98 @@ def shield_wrapper(name: str) -> Callable[[gym.Env], gym.Env] | None:
     return {"simple": shields.SimpleShield, "smart": shields.SmartShield}[name]
 
 
-def make_env(cfg: Config, seed: int, monitor_file: str | None = None, append: bool = False):
+def make_env(
+    cfg: Config,
+    seeds: EnvSeeds | None = None,
+    monitor_file: str | None = None,
+    append: bool = False,
+    shield: str | None = None,
+    monitor: bool = True,
+) -> Callable[[], gym.Env]:
     """A thunk that builds one env with the whole wrapper stack.
 
-    ``gym.make`` (with its TimeLimit) -> shield (``--shield``) -> Monitor
-    (episode return, length and ``is_success``, written to ``monitor_file``
-    when given, appended to it when ``append``). The action space is seeded
-    with ``seed``; the reset seeds come from the VecEnv (``vec_env.seed``).
+    ``gym.make`` (with its TimeLimit) -> shield (``shield``, default ``cfg.shield``) ->
+    Monitor (episode return, length and ``is_success``, written to ``monitor_file`` when
+    given, appended to it when ``append``; left out with ``monitor=False``). With ``seeds``
+    the env is reset once with ``seeds.reset`` and its action space seeded with
+    ``seeds.action_space``; every later reset continues that generator (the VecEnv passes
+    no seeds).
     """
+    shield_name = cfg.shield if shield is None else shield
 
     def thunk() -> gym.Env:
         env = gym.make(cfg.env_id, reward=cfg.reward)
-        shield = shield_wrapper(cfg.shield)
-        if shield is not None:
-            env = shield(env)
-        env = Monitor(
-            env, filename=monitor_file, info_keywords=("is_success",), override_existing=not append
-        )
-        env.action_space.seed(seed)
+        wrapper = shield_wrapper(shield_name)
+        if wrapper is not None:
+            env = wrapper(env)
+        if monitor:
+            env = Monitor(
+                env,
+                filename=monitor_file,
+                info_keywords=("is_success",),
+                override_existing=not append,
+            )
+        if seeds is not None:
+            env.reset(seed=seeds.reset)
+            env.action_space.seed(seeds.action_space)
         return env
 
     return thunk
 
 
 def make_vec_env(
-    cfg: Config, seed: int, n_envs: int, monitor_dir: Path | None = None, append: bool = False
+    cfg: Config,
+    seeds: Sequence[EnvSeeds],
+    monitor_dir: Path | None = None,
+    append: bool = False,
 ) -> VecEnv:
-    """``n_envs`` copies of :func:`make_env` in a Dummy (or Subproc) VecEnv, reset seeds set."""
+    """One :func:`make_env` per entry of ``seeds`` in a Dummy (or Subproc) VecEnv."""
     thunks = [
-        make_env(cfg, seed + i, str(monitor_dir / str(i)) if monitor_dir else None, append)
-        for i in range(n_envs)
+        make_env(cfg, s, str(monitor_dir / str(i)) if monitor_dir else None, append)
+        for i, s in enumerate(seeds)
     ]
-    vec: VecEnv = SubprocVecEnv(thunks) if cfg.subproc and n_envs > 1 else DummyVecEnv(thunks)
-    vec.seed(seed)  # env i gets reset seed seed + i on its first reset
-    return vec
+    return SubprocVecEnv(thunks) if cfg.subproc and len(thunks) > 1 else DummyVecEnv(thunks)
 
 
 def build_envs(
-    cfg: Config, seed: int, monitor_dir: Path | None = None, stats: Path | None = None
-) -> tuple[VecEnv, VecEnv]:
-    """The training and evaluation VecEnvs of a run (both with the full :func:`make_env` stack).
+    cfg: Config, seeds: RunSeeds, monitor_dir: Path | None = None, stats: Path | None = None
+) -> VecEnv:
+    """The training VecEnv of a run: ``cfg.n_envs`` envs on the run's ``train`` streams.
 
-    Training: ``cfg.n_envs`` envs, reset seeds ``seed + i``, Monitor CSVs in ``monitor_dir``
-    (appended to when ``stats`` is given, i.e. on resume). Evaluation: ``min(n_envs,
-    eval_episodes)`` envs seeded from ``seed + 1_000_000``. With ``cfg.normalize`` the training
-    env is a ``VecNormalize`` (observations and discounted-return reward scaling; loaded from
-    ``stats`` when that file exists) and the evaluation env a frozen ``VecNormalize`` that shares
-    the training env's observation statistics and returns raw rewards.
+    Monitor CSVs go to ``monitor_dir`` (appended to when ``stats`` is given, i.e. on resume).
+    With ``cfg.normalize`` it is a ``VecNormalize`` (observations, and with ``cfg.norm_reward``
+    rewards scaled by the std of the discounted return; loaded from ``stats`` when that file
+    exists). Evaluation envs come from :func:`make_eval_envs` and see the same observation
+    statistics through :func:`normalizer`.
     """
     resume = stats is not None
-    train_env = make_vec_env(cfg, seed, cfg.n_envs, monitor_dir, append=resume)
-    eval_env = make_vec_env(cfg, seed + 1_000_000, min(cfg.n_envs, max(cfg.eval_episodes, 1)))
+    train_env = make_vec_env(cfg, seeds.envs("train", cfg.n_envs), monitor_dir, append=resume)
     if cfg.normalize:
         if stats is not None and stats.is_file():
             train_env = VecNormalize.load(str(stats), train_env)
         else:
             train_env = VecNormalize(train_env, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
-        eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
-        eval_env.obs_rms = train_env.obs_rms  # the same object: updated as training goes on
-    return train_env, eval_env
+    return train_env
+
+
+def make_eval_envs(
+    cfg: Config, seeds: RunSeeds, stream: str, n: int, shield: str | None = None
+) -> list[gym.Env]:
+    """``n`` plain envs (no Monitor) on the ``validation`` or ``test`` streams of a run.
+
+    ``shield`` overrides ``cfg.shield`` (``"none"`` evaluates a shielded policy without its
+    shield). Envs built from the same ``(seeds, stream, n)`` draw the same episodes in the same
+    order, whatever the shield: evaluations on them are paired.
+    """
+    if stream not in ("validation", "test"):
+        raise ValueError(f"evaluation stream must be 'validation' or 'test', got {stream!r}")
+    return [make_env(cfg, s, shield=shield, monitor=False)() for s in seeds.envs(stream, n)]
+
+
+def normalizer(train_env: VecEnv) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The training env's observation normalisation (frozen: it does not update the statistics),
+    or ``None`` without ``VecNormalize``."""
+    return train_env.normalize_obs if isinstance(train_env, VecNormalize) else None
 
 
 def train_callbacks(cfg: Config, desc: str = "") -> list[BaseCallback]:
@@ -268,7 +318,10 @@ def train_callbacks(cfg: Config, desc: str = "") -> list[BaseCallback]:
 
 
 def seed_everything(seed: int) -> None:
-    """Python, numpy and torch RNGs (env and action-space seeds are set where they are built)."""
+    """Python, numpy's legacy global generator and torch (envs are seeded where they are built).
+
+    Call with :attr:`train.seeding.RunSeeds.global_seed`.
+    """
     random.seed(seed)
     np.random.seed(seed)  # noqa: NPY002  (SB3 and Gymnasium wrappers may use the global RNG)
     torch.manual_seed(seed)
@@ -282,7 +335,12 @@ def run_name(cfg: Config) -> str:
 
 
 def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
-    """A fresh PPO with separate policy and value nets of the configured sizes."""
+    """A fresh PPO with separate policy and value nets of the configured sizes.
+
+    ``PPO(seed=None)``: SB3's own seeding would reset the envs with ``seed + i`` (the VecEnv's
+    consecutive seeds), undoing :mod:`train.seeding`; call :func:`seed_everything` first (the
+    policy's initial weights come from torch's global generator).
+    """
     return PPO(
         "MlpPolicy",
         vec_env,
@@ -302,60 +360,153 @@ def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
             "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
             "log_std_init": cfg.log_std_init,
         },
-        seed=cfg.seed,
+        seed=None,
         device="cpu",
         verbose=cfg.verbose,
     )
 
 
-def evaluate(model: PPO, vec_env: VecEnv, n_episodes: int) -> dict[str, float]:
-    """Success rate of the deterministic policy over ``n_episodes`` episodes.
+def evaluate(
+    model: PPO,
+    eval_envs: Sequence[gym.Env],
+    n_episodes: int,
+    *,
+    deterministic: bool = True,
+    normalize: Callable[[np.ndarray], np.ndarray] | None = None,
+    stop_cycles: bool = True,
+) -> dict[str, float]:
+    """Success rate of the policy over ``n_episodes`` episodes on the plain envs ``eval_envs``.
 
-    ``vec_env`` should carry the same shield as training (the thesis keeps it
-    in place). Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes, so
-    short episodes are not over-counted. Returns ``success_rate``,
-    ``failure_rate`` (``info["failure"]``), ``mean_return``, ``mean_length``,
-    ``intervention_rate`` (fraction of steps where the shield changed the
-    action; 0 without a shield) and ``episodes``.
+    Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes (so short episodes are not
+    over-counted); the policy is queried for all running envs at once, on observations passed
+    through ``normalize`` (:func:`normalizer`). Build ``eval_envs`` with :func:`make_eval_envs`
+    (shielded or not); the shield is part of each env.
+
+    ``stop_cycles`` (deterministic policy only, envs that expose ``unwrapped.state`` and have
+    a time limit): an episode whose state repeats has entered a cycle, which it can only
+    leave by truncation, so it is completed without stepping on: not a success, not a
+    failure, length = the time limit, return and shield interventions those of the cycle
+    repeated up to the limit. This is exact for an env and shield that are deterministic
+    functions of ``state`` (and the episode's goal) and a policy that maps equal observations
+    to equal actions (the islands world; the simple shield's zero step is such a fixed
+    point), and saves running frozen episodes to the limit.
+
+    Returns ``episodes``, ``successes``, ``failures``, ``success_rate``, ``failure_rate``
+    (``info["failure"]``), ``mean_return``, ``mean_length``, ``intervention_rate`` (fraction
+    of steps where the shield changed the action; 0 without a shield) and ``cycles_stopped``.
     """
-    k = vec_env.num_envs
-    targets = np.array([(n_episodes + i) // k for i in range(k)])
-    counts = np.zeros(k, dtype=int)
-    ret = np.zeros(k)
-    length = np.zeros(k, dtype=int)
-    succ, fail, rets, lens = [], [], [], []
-    steps = interventions = 0
-    obs = vec_env.reset()
-    while (counts < targets).any():
-        action, _ = model.predict(obs, deterministic=True)
-        obs, rew, done, infos = vec_env.step(action)
-        for i in range(k):
-            if counts[i] >= targets[i]:
+    k = len(eval_envs)
+    if k == 0 and n_episodes > 0:
+        raise ValueError("evaluate needs at least one env")
+    targets = [(n_episodes + i) // k for i in range(k)] if k else []
+    counts = [0] * k
+    succ: list[bool] = []
+    fail: list[bool] = []
+    rets: list[float] = []
+    lens: list[int] = []
+    steps = interventions = cycles = 0
+    can_stop = [
+        stop_cycles
+        and deterministic
+        and hasattr(env.unwrapped, "state")
+        and env.spec is not None
+        and env.spec.max_episode_steps is not None
+        for env in eval_envs
+    ]
+    obs: list[Any] = [None] * k
+    rewards: list[list[float]] = [[] for _ in range(k)]  # per step of the current episode
+    shielded: list[list[bool]] = [[] for _ in range(k)]
+    seen: list[dict[bytes, int]] = [{} for _ in range(k)]  # state -> steps taken when there
+
+    def start(i: int) -> None:
+        obs[i], _ = eval_envs[i].reset()
+        rewards[i], shielded[i] = [], []
+        seen[i] = {np.asarray(eval_envs[i].unwrapped.state).tobytes(): 0} if can_stop[i] else {}
+
+    def finish(i: int, success: bool, failure: bool, ret: float, length: int, n_int: int) -> None:
+        nonlocal steps, interventions
+        succ.append(success)
+        fail.append(failure)
+        rets.append(ret)
+        lens.append(length)
+        steps += length
+        interventions += n_int
+        counts[i] += 1
+        if counts[i] < targets[i]:
+            start(i)
+
+    for i in range(k):
+        if targets[i] > 0:
+            start(i)
+    while True:
+        active = [i for i in range(k) if counts[i] < targets[i]]
+        if not active:
+            break
+        batch = np.stack([obs[i] for i in active])
+        if normalize is not None:
+            batch = normalize(batch)
+        actions, _ = model.predict(batch, deterministic=deterministic)
+        for j, i in enumerate(active):
+            obs[i], reward, terminated, truncated, info = eval_envs[i].step(actions[j])
+            rewards[i].append(float(reward))
+            shielded[i].append(bool(info.get("shield_intervened", False)))
+            t = len(rewards[i])
+            if terminated or truncated:
+                finish(
+                    i,
+                    bool(info.get("is_success", False)),
+                    bool(info.get("failure", False)),
+                    float(np.sum(rewards[i])),
+                    t,
+                    sum(shielded[i]),
+                )
                 continue
-            ret[i] += rew[i]
-            length[i] += 1
-            steps += 1
-            interventions += bool(infos[i].get("shield_intervened", False))
-            if done[i]:
-                succ.append(bool(infos[i].get("is_success", False)))
-                fail.append(bool(infos[i].get("failure", False)))
-                rets.append(float(ret[i]))
-                lens.append(int(length[i]))
-                counts[i] += 1
-                ret[i], length[i] = 0.0, 0
+            if not can_stop[i]:
+                continue
+            key = np.asarray(eval_envs[i].unwrapped.state).tobytes()
+            first = seen[i].setdefault(key, t)
+            if first == t:
+                continue
+            # steps first+1 .. t form a cycle; repeat it up to the time limit
+            limit = int(eval_envs[i].spec.max_episode_steps)
+            period = t - first
+            cyc_r, cyc_s = rewards[i][first:], shielded[i][first:]
+            rest = range(limit - t)
+            cycles += 1
+            finish(
+                i,
+                False,
+                False,
+                float(np.sum(rewards[i] + [cyc_r[m % period] for m in rest])),
+                limit,
+                sum(shielded[i]) + sum(cyc_s[m % period] for m in rest),
+            )
     mean = lambda xs: float(np.mean(xs)) if xs else float("nan")  # noqa: E731
     return {
         "episodes": len(succ),
+        "successes": int(np.sum(succ)),
+        "failures": int(np.sum(fail)),
         "success_rate": mean(succ),
         "failure_rate": mean(fail),
         "mean_return": mean(rets),
         "mean_length": mean(lens),
         "intervention_rate": interventions / steps if steps else 0.0,
+        "cycles_stopped": cycles,
     }
 
 
 class TrainStats(BaseCallback):
-    """Logs ``charts/success_rate`` (training episodes) and ``shield/intervention_rate``."""
+    """Training-episode statistics: the thesis' measure of a shielded stochastic policy.
+
+    Logs ``charts/success_rate`` (training episodes that ended in the rollout) and
+    ``shield/intervention_rate`` per rollout, and keeps every finished training episode in
+    :attr:`episodes` as ``(step, success, failure, length)``, ``step`` being the run's
+    ``num_timesteps`` when it ended.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.episodes: list[tuple[int, bool, bool, int]] = []
 
     def _on_rollout_start(self) -> None:
         self.successes: list[bool] = []
@@ -366,7 +517,12 @@ class TrainStats(BaseCallback):
             self.steps += 1
             self.interventions += bool(info.get("shield_intervened", False))
             if done:
-                self.successes.append(bool(info.get("is_success", False)))
+                success = bool(info.get("is_success", False))
+                self.successes.append(success)
+                length = int(info["episode"]["l"]) if "episode" in info else -1
+                self.episodes.append(
+                    (int(self.num_timesteps), success, bool(info.get("failure", False)), length)
+                )
         return True
 
     def _on_rollout_end(self) -> None:
@@ -418,22 +574,23 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         config = {**dataclasses.asdict(cfg), "resume": None}
         (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
-    # ---- seeds, all in one place ------------------------------------------------------------
+    # ---- seeds, all in one place (train.seeding) ---------------------------------------------
     done_steps = 0
     if cfg.resume is not None:
         with zipfile.ZipFile(run_dir / "model.zip") as z:
             done_steps = int(json.loads(z.read("data"))["num_timesteps"])
-    # a resumed run draws fresh episodes: its seeds are offset by the steps already done
-    seed = cfg.seed + done_steps
-    seed_everything(seed)  # random, numpy, torch
+    # a resumed run is a new segment of the seed tree: fresh episodes, no repeated streams
+    seeds = RunSeeds(cfg.seed, segment=done_steps)
+    seed_everything(seeds.global_seed)  # random, numpy, torch (initial weights, sampling)
     stats = run_dir / "vecnormalize.pkl" if cfg.resume is not None else None
-    train_env, eval_env = build_envs(cfg, seed, run_dir / "monitor", stats)
-    # PPO(seed=...) / set_random_seed re-seeds random, numpy, torch and the action space
+    train_env = build_envs(cfg, seeds, run_dir / "monitor", stats)  # "train" streams
+    n_eval = min(cfg.n_envs, max(cfg.eval_episodes, 1))
+    eval_envs = make_eval_envs(cfg, seeds, "validation", n_eval)
     # -----------------------------------------------------------------------------------------
 
     if cfg.resume is not None:
-        model = PPO.load(run_dir / "model.zip", env=train_env, device="cpu")
-        model.set_random_seed(seed)
+        # seed=None: SB3 would otherwise re-seed the envs with consecutive seeds
+        model = PPO.load(run_dir / "model.zip", env=train_env, device="cpu", seed=None)
     else:
         model = build_model(cfg, train_env)
     model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
@@ -447,18 +604,20 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         train_env.save(str(run_dir / "vecnormalize.pkl"))
 
     t0 = time.perf_counter()
-    result = evaluate(model, eval_env, cfg.eval_episodes)
+    result = evaluate(model, eval_envs, cfg.eval_episodes, normalize=normalizer(train_env))
     result.update(
         num_timesteps=int(model.num_timesteps),
         train_seconds=round(train_s, 2),
         eval_seconds=round(time.perf_counter() - t0, 2),
         deterministic=True,
+        stream="validation",
         shield=cfg.shield,
         reward=cfg.reward,
     )
     (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     train_env.close()
-    eval_env.close()
+    for env in eval_envs:
+        env.close()
     print(
         f"{run_dir}: {result['num_timesteps']} steps, success rate "
         f"{result['success_rate']:.3f} over {result['episodes']} episodes "
