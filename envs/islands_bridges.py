@@ -10,6 +10,7 @@ unsafe actions before they are executed.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from envs.geometry import Box, Disc, Piece, signed_distance
+from envs.geometry import Box, Disc, Piece, point_depth, signed_distance
 
 __all__ = [
     "DEFAULT_BRIDGES",
@@ -70,6 +71,13 @@ _LAND = np.array([236, 216, 165], dtype=np.uint8)
 _SHORE = np.array([90, 80, 60], dtype=np.uint8)
 _GOAL = np.array([30, 80, 220], dtype=np.uint8)
 _AGENT = np.array([220, 30, 30], dtype=np.uint8)
+
+
+def _dist(x0: float, y0: float, x1: float, y1: float) -> float:
+    """``np.linalg.norm((x0 - x1, y0 - y1))`` in floats (``sqrt(dx*dx + dy*dy)``, how numpy
+    reduces two components; the same value to the last bit, tested)."""
+    dx, dy = x0 - x1, y0 - y1
+    return math.sqrt(dx * dx + dy * dy)
 
 
 def _area(piece: Piece) -> float:
@@ -238,6 +246,19 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.action_scale = self.max_step
         areas = np.array([_area(p) for p in self.islands])
         self._island_p = areas / areas.sum()
+        # cumulative island probabilities, with each island excluded in turn (None: none), built
+        # exactly as Generator.choice(n, p=p) builds its cdf, so that _choose_island draws the
+        # same island from the same uniform number (tested against Generator.choice)
+        self._island_cdf: dict[int | None, list[float]] = {}
+        for exclude in (None, *range(len(self.islands))):
+            p = self._island_p
+            if exclude is not None:
+                p = p.copy()
+                p[exclude] = 0.0
+                p /= p.sum()
+            cdf = p.cumsum()
+            cdf /= cdf[-1]
+            self._island_cdf[exclude] = cdf.tolist()
 
         lo = np.min([p.bounds()[0] for p in self.safe_pieces], axis=0)
         hi = np.max([p.bounds()[1] for p in self.safe_pieces], axis=0)
@@ -266,6 +287,15 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         """Thesis ``M(s)``: signed distance to the edge of the safe region, >= 0 is safe."""
         return float(signed_distance(self.safe_pieces, np.asarray(state, dtype=float)))
 
+    def _depth(self, x: float, y: float) -> float:
+        """``safe_distance((x, y))`` in floats: the same value to the last bit, no arrays."""
+        best = -math.inf
+        for piece in self.safe_pieces:
+            d = point_depth(piece, x, y)
+            if d > best:
+                best = d
+        return best
+
     # ---- Gymnasium API ----------------------------------------------------------------
 
     def _sample_on_island(self, i: int) -> NDArray[np.float64]:
@@ -278,23 +308,26 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         lo, hi = piece.bounds()
         return lo + rng.random(2) * (hi - lo)
 
+    def _choose_island(self, exclude: int | None) -> int:
+        """``np_random.choice(len(islands), p=p)`` (``p`` with ``exclude`` zeroed and
+        renormalised): one uniform number looked up in the same cdf, the same draw."""
+        cdf = self._island_cdf[exclude]
+        return bisect.bisect_right(cdf, self.np_random.random())
+
     def _sample_point(self, exclude: int | None = None) -> tuple[int, NDArray[np.float64]]:
-        p = self._island_p
-        if exclude is not None:
-            p = p.copy()
-            p[exclude] = 0.0
-            p /= p.sum()
         for _ in range(1000):
-            i = int(self.np_random.choice(len(self.islands), p=p))
+            i = self._choose_island(exclude)
             x = self._sample_on_island(i)
-            if self.safe_distance(x) >= 0:  # guards round-off on a disc's rim
+            if self._depth(float(x[0]), float(x[1])) >= 0:  # guards round-off on a disc's rim
                 return i, x
         raise RuntimeError("could not sample a point in the safe region")  # pragma: no cover
 
     def _island_of(self, x: NDArray[np.float64]) -> int:
-        """Index of the island that contains ``x`` (deepest), -1 if on no island."""
-        depth = [float(p.signed_distance(x)) for p in self.islands]
-        i = int(np.argmax(depth))
+        """Index of the island that contains ``x`` (deepest; the first of equals), -1 if on
+        no island."""
+        px, py = float(x[0]), float(x[1])
+        depth = [point_depth(p, px, py) for p in self.islands]
+        i = max(range(len(depth)), key=depth.__getitem__)
         return i if depth[i] >= 0 else -1
 
     def _given_point(self, options: dict[str, Any], key: str) -> NDArray[np.float64] | None:
@@ -321,16 +354,17 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             exclude = goal_island if self.different_islands and goal_island >= 0 else None
             for _ in range(1000):
                 _, start = self._sample_point(exclude)
-                if np.linalg.norm(start - goal) > self.goal_eps:
+                if _dist(start[0], start[1], goal[0], goal[1]) > self.goal_eps:
                     break
             else:  # pragma: no cover - only on maps with tiny islands
                 raise RuntimeError("could not sample a start farther than goal_eps from the goal")
         self.state = np.array(start, dtype=float)
         self.goal = np.array(goal, dtype=float)
         self._has_reset = True
+        sx, sy = float(self.state[0]), float(self.state[1])
         info = {
-            "distance_to_edge": self.safe_distance(self.state),
-            "distance_to_goal": float(np.linalg.norm(self.state - self.goal)),
+            "distance_to_edge": self._depth(sx, sy),
+            "distance_to_goal": _dist(sx, sy, float(self.goal[0]), float(self.goal[1])),
             "start_island": self._island_of(self.state),
             "goal_island": goal_island,
         }
@@ -342,11 +376,19 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if not self._has_reset:
             raise RuntimeError("call reset() before step()")
         a = np.asarray(action, dtype=float)
-        if a.shape != (2,) or not np.all(np.isfinite(a)):
+        if a.shape != (2,):
             raise ValueError(f"action must be a finite array of shape (2,), got {action!r}")
-        self.state = self.predict(self.state, a)
-        edge = self.safe_distance(self.state)
-        dist = float(np.linalg.norm(self.state - self.goal))
+        ax, ay = float(a[0]), float(a[1])
+        if not (math.isfinite(ax) and math.isfinite(ay)):
+            raise ValueError(f"action must be a finite array of shape (2,), got {action!r}")
+        # predict(), in floats: s + k * clip(a, -1, 1), the same IEEE operations
+        k = self.action_scale
+        x = float(self.state[0]) + k * min(max(ax, -1.0), 1.0)
+        y = float(self.state[1]) + k * min(max(ay, -1.0), 1.0)
+        self.state = np.array([x, y])
+        edge = self._depth(x, y)
+        gx, gy = float(self.goal[0]), float(self.goal[1])
+        dist = _dist(x, y, gx, gy)
         failure = edge < 0
         success = (not failure) and dist <= self.goal_eps
         if self.reward_mode == "dense":
@@ -360,7 +402,8 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "distance_to_goal": dist,
             "reward_goal": reward,
         }
-        return self._obs(), reward, failure or success, False, info
+        obs = np.array([x, y, gx, gy], dtype=np.float32)
+        return obs, reward, failure or success, False, info
 
     def _obs(self) -> NDArray[np.float32]:
         return np.concatenate([self.state, self.goal]).astype(np.float32)

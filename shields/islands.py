@@ -283,7 +283,9 @@ def _is_safe(pieces: Sequence[Piece], x: float, y: float) -> bool:
 
 
 def _bounds2(v: ArrayLike) -> Point:
-    b = np.broadcast_to(np.asarray(v, dtype=float), (2,))
+    b = np.asarray(v, dtype=float)
+    if b.shape != (2,):  # a scalar bound for both components
+        b = np.broadcast_to(b, (2,))
     return float(b[0]), float(b[1])
 
 

@@ -62,8 +62,8 @@ class _ShieldWrapper(gym.Wrapper):
                 f"{type(env.unwrapped).__name__} lacks {missing}"
             )
         #: The action box ``[low, high]`` (float64) that agent actions are clipped to.
-        self._low = np.asarray(env.action_space.low, dtype=np.float64)
-        self._high = np.asarray(env.action_space.high, dtype=np.float64)
+        self._low = np.array(env.action_space.low, dtype=np.float64)
+        self._high = np.array(env.action_space.high, dtype=np.float64)
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
         """``(a~, intervened)`` for an in-box action ``clip(a)`` in the current state."""
@@ -73,7 +73,7 @@ class _ShieldWrapper(gym.Wrapper):
         """Clip the action to the action box, shield it, step the inner env with the result,
         record the agent's and the executed action in ``info``."""
         agent_action = np.array(action, dtype=np.float64)
-        clipped = np.clip(agent_action, self._low, self._high)
+        clipped = np.minimum(np.maximum(agent_action, self._low), self._high)  # np.clip, faster
         executed, intervened = self.shield(clipped)
         obs, reward, terminated, truncated, info = self.env.step(executed)
         info = dict(info)

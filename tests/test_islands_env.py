@@ -358,3 +358,40 @@ def test_gym_make_registration_and_time_limit(env_id):
         _, _, term, trunc, _ = env.step(np.zeros(2, dtype=np.float32))
         steps += 1
     assert trunc and not term and steps == 200
+
+
+def test_float_paths_equal_the_numpy_definitions_bit_for_bit():
+    """step() and reset() compute in floats; each value equals its numpy definition exactly:
+    the island draw equals ``Generator.choice(n, p=p)`` from the same generator state, the
+    distances ``np.linalg.norm`` and ``signed_distance``, the next state ``predict``."""
+    from envs.islands_bridges import _dist
+
+    env = IslandsBridges()
+    env.reset(seed=0)
+    n = len(env.islands)
+    for exclude in (None, *range(n)):
+        p = env._island_p.copy()
+        if exclude is not None:
+            p[exclude] = 0.0
+            p /= p.sum()
+        for seed in range(300):
+            ours = np.random.Generator(np.random.PCG64(seed))
+            ref = np.random.Generator(np.random.PCG64(seed))
+            env._np_random = ours
+            assert env._choose_island(exclude) == int(ref.choice(n, p=p))
+            assert ours.bit_generator.state == ref.bit_generator.state  # one draw each
+    rng = np.random.default_rng(1)
+    env.reset(seed=1)
+    for _ in range(3000):
+        x, y, gx, gy = rng.uniform(-0.2, 2.1, 4)
+        assert _dist(x, y, gx, gy) == float(np.linalg.norm(np.array([x, y]) - (gx, gy)))
+        assert env._depth(x, y) == env.safe_distance((x, y))
+        s = env.state.copy()
+        a = rng.uniform(-1.5, 1.5, 2)
+        obs, _, terminated, _, info = env.step(a)
+        assert np.array_equal(env.state, env.predict(s, a))
+        assert info["distance_to_edge"] == env.safe_distance(env.state)
+        assert info["distance_to_goal"] == float(np.linalg.norm(env.state - env.goal))
+        assert np.array_equal(obs, np.concatenate([env.state, env.goal]).astype(np.float32))
+        if terminated:
+            env.reset()

@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 
 from train import islands, ppo
+from train.seeding import RunSeeds
+from train.stats import wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = ["--n-envs", "2", "--n-steps", "64", "--batch-size", "64", "--n-epochs", "1"]
@@ -63,7 +65,7 @@ def test_ppo_smoke_run_writes_model_config_eval_and_monitor(run_dir: Path) -> No
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["shield"] == "none" and cfg["total_steps"] == 256 and cfg["pi"] == [64, 64]
     ev = json.loads((run_dir / "eval.json").read_text())
-    assert 0.0 <= ev["success_rate"] <= 1.0
+    assert 0.0 <= ev["success_rate"] <= 1.0 and ev["stream"] == "validation"
     assert ev["episodes"] == 6 and ev["deterministic"] and ev["num_timesteps"] == 256
     lines = monitor_lines(run_dir)
     assert lines[0].startswith("#") and lines[1] == "r,l,t,is_success"
@@ -96,48 +98,98 @@ def test_ppo_resume_continues_the_run(run_dir: Path) -> None:
 
 def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     out = tmp_path / "bench"
-    args = ["--quick", "--steps", "256", "--eval-every", "128", "--eval-episodes", "3"]
-    args += ["--final-episodes", "3", "--shields", "none", "smart", "--workers", "2"]
+    args = ["--quick", "--steps", "256", "--window", "128", "--final-window", "128"]
+    args += ["--eval-every", "128", "--eval-episodes", "3", "--final-episodes", "5"]
+    args += ["--eval-envs", "2", "--shields", "none", "smart", "--workers", "2"]
+    args += ["--study-nets", "medium", "--study-envs", "ihm/IslandsBridges-v0"]
     p = run("train.islands", *args, *TINY[:4], "--out", str(out), "--no-progress")
     assert p.returncode == 0, p.stderr
     with (out / "islands.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == islands.COLUMNS
-    # 2 shields x 2 rewards x 1 seed (quick) x evaluations at 0, 128, 256 steps
-    assert len(rows) == 12
-    assert {(r["shield"], r["reward"]) for r in rows} == {
-        (s, r) for s in ("none", "smart") for r in ("dense", "sparse")
-    }
-    assert sorted({int(r["steps"]) for r in rows}) == [0, 128, 256]
-    assert all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
-    assert all(r["net"] == "small" and r["pi"] == "16x16" for r in rows)
-    smart = [r for r in rows if r["shield"] == "smart"]
-    assert all(float(r["failure_rate"]) == 0.0 for r in smart)  # the shield stays in place
-    png = (out / "islands.png").read_bytes()
-    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
-    assert "| smart | sparse | small |" in (out / "summary.md").read_text()
-    assert "| none | dense | small |" in p.stdout
+    assert {r["measure"] for r in rows} == set(islands.MEASURES)
+    # grid: 2 maps x 2 shields x 2 rewards x 1 seed (quick) with 2x16 nets, plus the study
+    # (2x64, smart, sparse, v0 map)
+    configs = {(r["env_id"], r["shield"], r["reward"], r["net"]) for r in rows}
+    assert len(configs) == 2 * 2 * 2 + 1
+    assert ("ihm/IslandsBridges-v0", "smart", "sparse", "medium") in configs
+    assert {r["map"] for r in rows} == {"dead-end", "ring"}
+    for config in configs:
+        mine = [r for r in rows if (r["env_id"], r["shield"], r["reward"], r["net"]) == config]
+        by = {m: [r for r in mine if r["measure"] == m] for m in islands.MEASURES}
+        assert [int(r["steps"]) for r in by["train_stochastic"]] == [128, 256]
+        assert [int(r["steps"]) for r in by["eval_deterministic"]] == [128]
+        for m in ("final_stochastic", "final_deterministic", "final_deterministic_noshield"):
+            (row,) = by[m]
+            assert int(row["episodes"]) == 5 and int(row["steps"]) == 256
+        # the last-window training measure is the last window's counts (window = final window)
+        (fin,) = by["train_stochastic_final"]
+        assert fin["episodes"] == by["train_stochastic"][-1]["episodes"]
+    for r in rows:
+        n, k = int(r["episodes"]), int(r["successes"])
+        if n:
+            assert float(r["success_rate"]) == pytest.approx(k / n)
+            lo, hi = wilson_interval(k, n)
+            assert float(r["ci_low"]) == pytest.approx(lo) and float(r["ci_high"]) == pytest.approx(
+                hi
+            )
+            assert float(r["ci_low"]) <= k / n <= float(r["ci_high"])
+    smart_final = [r for r in rows if r["shield"] == "smart" and r["measure"].startswith("final_")]
+    # the shield stays in place: no held-out failure with it
+    assert all(int(r["failures"]) == 0 for r in smart_final if "noshield" not in r["measure"])
+    for name in ("islands.png", "islands_nets.png"):
+        png = (out / name).read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    summary = (out / "summary.md").read_text()
+    assert (
+        "| ring | smart | sparse | 16x16 |" in summary
+        and "| dead-end | none | dense | 16x16 |" in p.stdout
+    )
+    # re-summarising from the CSV gives the same table
+    assert islands.summary_table(islands.read_csv(out / "islands.csv")) == summary.split("\n\n")[0]
 
 
-def test_build_envs_share_frozen_normalisation_and_lr_schedule() -> None:
+def test_build_envs_and_frozen_normalisation_and_lr_schedule() -> None:
     cfg = ppo.Config(n_envs=2, eval_episodes=3, lr_schedule="linear", learning_rate=1e-3)
-    train_env, eval_env = ppo.build_envs(cfg, seed=5)
-    assert train_env.training and not eval_env.training and not eval_env.norm_reward
-    assert eval_env.obs_rms is train_env.obs_rms  # evaluation sees the current statistics
+    train_env = ppo.build_envs(cfg, RunSeeds(5))
+    assert train_env.training and train_env.num_envs == 2
     train_env.reset()
     train_env.step(np.zeros((2, 2), dtype=np.float32))
-    before = eval_env.obs_rms.count
-    eval_env.reset()
-    eval_env.step(np.zeros((2, 2), dtype=np.float32))
-    assert eval_env.obs_rms.count == before  # evaluation does not update them
+    norm = ppo.normalizer(train_env)
+    before = train_env.obs_rms.count
+    x = np.array([[0.4, 0.4, 1.6, 1.55]], dtype=np.float32)
+    y = norm(x)
+    assert train_env.obs_rms.count == before  # evaluation does not update the statistics
+    np.testing.assert_allclose(
+        y, np.clip((x - train_env.obs_rms.mean) / np.sqrt(train_env.obs_rms.var + 1e-8), -10, 10)
+    )
     model = ppo.build_model(cfg, train_env)
+    assert model.seed is None  # SB3 would re-seed the envs with seed + i
     assert model.lr_schedule(1.0) == pytest.approx(1e-3)  # progress_remaining 1 -> 0
     assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
-    raw_train, raw_eval = ppo.build_envs(ppo.Config(n_envs=2, normalize=False), seed=5)
-    assert not isinstance(raw_train, ppo.VecNormalize)
+    raw_train = ppo.build_envs(ppo.Config(n_envs=2, normalize=False), RunSeeds(5))
+    assert not isinstance(raw_train, ppo.VecNormalize) and ppo.normalizer(raw_train) is None
     assert ppo.build_model(ppo.Config(), raw_train).lr_schedule(0.25) == pytest.approx(3e-4)
-    for env in (train_env, eval_env, raw_train, raw_eval):
+    for env in (train_env, raw_train):
         env.close()
+
+
+def test_same_seed_same_initial_policy_and_rollout() -> None:
+    """Two builds from one run seed give the same weights and the same first rollout."""
+    cfg = ppo.Config(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, normalize=False)
+    outs = []
+    for seed in (3, 3, 4):
+        seeds = RunSeeds(seed)
+        ppo.seed_everything(seeds.global_seed)
+        env = ppo.build_envs(cfg, seeds)
+        model = ppo.build_model(cfg, env)
+        w = np.concatenate([p.detach().numpy().ravel() for p in model.policy.parameters()])
+        model.learn(64)
+        outs.append((w, model.rollout_buffer.observations.copy()))
+        env.close()
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    np.testing.assert_array_equal(outs[0][1], outs[1][1])
+    assert not np.array_equal(outs[0][0], outs[2][0])
 
 
 def test_help_documents_every_option() -> None:
@@ -168,7 +220,11 @@ def test_ppo_bad_options_exit_with_a_message(
 
 def test_islands_bad_options_exit_with_a_message(capsys: pytest.CaptureFixture[str]) -> None:
     for argv, message in [
-        (["--nets", "huge"], "unknown net 'huge'"),
+        (["--net", "huge"], "unknown net 'huge'"),
+        (["--study-nets", "tiny"], "unknown net 'tiny'"),
+        (["--env-ids", "ihm/Nowhere-v0"], "unknown env id 'ihm/Nowhere-v0'"),
+        (["--study-rewards", "shaped"], "unknown reward 'shaped'"),
+        (["--eval-every", "-1"], "--eval-every must be >= 0"),
         (["--shields", "magic"], "invalid choice: 'magic'"),
         (["--workers", "0"], "--workers must be >= 1"),
     ]:

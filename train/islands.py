@@ -12,22 +12,24 @@ configuration and scores it two ways, each with a 95 % Wilson interval
   :mod:`train.seeding`, which neither training nor tuning drew from), the stochastic policy
   with the shield, the deterministic policy with the shield and the deterministic policy
   without it. The three evaluations face the same start/goal pairs (paired envs). During
-  training the deterministic policy with the shield is also scored every ``--eval-every``
-  steps on ``--eval-episodes`` validation episodes.
+  training the deterministic policy with the shield can also be scored every
+  ``--eval-every`` steps on ``--eval-episodes`` validation episodes (off by default).
 
 Configurations: every shield x reward x map (``--env-ids``: the five-island map with a dead
 end, ``ihm/IslandsBridges-v0``, and the four-island ring, ``ihm/IslandsBridgesRing-v0``) with
 the ``--net`` networks (2x64), plus the network-size study: ``--study-nets`` (2x16 and
 2x256) for ``--study-shields`` x ``--study-rewards`` x ``--study-envs``. Each configuration
-runs ``--seeds`` independent run seeds (1..N). Jobs run in ``--workers`` processes, the
-slowest first.
+runs ``--seeds`` independent run seeds (1..N; the study ``--study-seeds``, 2 by default, to
+keep the whole benchmark within 45 minutes on 2 cores). Jobs run in ``--workers`` processes,
+the slowest first.
 
 Writes to ``--out``::
 
     islands.csv       one row per (configuration, seed, measure, step); measures:
                       train_stochastic (training episodes that ended in the window up to
                       ``steps``), train_stochastic_final (the last ``--final-window`` steps),
-                      eval_deterministic (validation, during training), final_stochastic,
+                      eval_deterministic (validation, during training, with --eval-every),
+                      final_stochastic,
                       final_deterministic, final_deterministic_noshield (test, at the end)
     islands.png       success vs training steps, one panel per map and reward, one colour per
                       shield: solid the thesis' measure, dashed the deterministic policy
@@ -123,11 +125,14 @@ class BenchConfig:
     study_rewards: list[str] = opt(["sparse"], "rewards of the network-size study")
     study_envs: list[str] = opt(["ihm/IslandsBridgesRing-v0"], "maps of the network-size study")
     seeds: int = opt(3, "independent run seeds per configuration (1..N)")
+    study_seeds: int = opt(
+        2, "run seeds of the network-study configurations (1..N; fewer repeats keep 45 min)"
+    )
     steps: int = opt(200_000, "training steps per run")
     window: int = opt(10_000, "steps per point of the thesis' (training-episode) curve")
     final_window: int = opt(20_000, "last steps whose training episodes give its final value")
     eval_every: int = opt(
-        50_000, "score the deterministic policy every this many steps (0: only at the end)"
+        0, "also score the deterministic policy every this many steps (0: only at the end)"
     )
     eval_episodes: int = opt(100, "validation episodes per evaluation during training")
     final_episodes: int = opt(500, "held-out episodes of each final evaluation, per seed")
@@ -145,6 +150,7 @@ class BenchConfig:
 
 QUICK = {
     "seeds": 1,
+    "study_seeds": 1,
     "steps": 5000,
     "window": 2500,
     "final_window": 2500,
@@ -189,7 +195,8 @@ def parse_config(argv: Sequence[str] | None = None) -> BenchConfig:
         for e in dict.fromkeys([*bc.env_ids, *bc.study_envs])
         if e not in gym.registry
     ]
-    positive = ("seeds", "steps", "window", "final_window", "eval_episodes", "final_episodes")
+    positive = ("seeds", "study_seeds", "steps", "window", "final_window", "eval_episodes")
+    positive = (*positive, "final_episodes")
     for name in (*positive, "eval_envs", "workers", "n_envs", "n_steps", "batch_size"):
         if getattr(bc, name) < 1:
             problems.append(f"--{name.replace('_', '-')} must be >= 1")
@@ -216,7 +223,7 @@ def _jobs(bc: BenchConfig) -> list[dict[str, Any]]:
         for e in bc.study_envs
         for s in bc.study_shields
         for r in bc.study_rewards
-        for seed in range(1, bc.seeds + 1)
+        for seed in range(1, bc.study_seeds + 1)
     ]
     cost = {"large": 0, "medium": 1, "small": 2}
     return sorted(jobs, key=lambda j: cost.get(j["net"], 1))  # stable: grid order within
