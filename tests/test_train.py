@@ -98,7 +98,8 @@ def test_ppo_resume_continues_the_run(run_dir: Path) -> None:
 
 def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     out = tmp_path / "bench"
-    args = ["--quick", "--steps", "256", "--window", "128", "--final-window", "128"]
+    # 200 steps: not a rollout boundary (2 envs x 64 steps), so the budget stop is exercised
+    args = ["--quick", "--steps", "200", "--window", "128", "--final-window", "72"]
     args += ["--eval-every", "128", "--eval-episodes", "3", "--final-episodes", "5"]
     args += ["--eval-envs", "2", "--shields", "none", "smart", "--workers", "2"]
     args += ["--study-nets", "medium", "--study-envs", "ihm/IslandsBridges-v0"]
@@ -117,12 +118,12 @@ def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     for config in configs:
         mine = [r for r in rows if (r["env_id"], r["shield"], r["reward"], r["net"]) == config]
         by = {m: [r for r in mine if r["measure"] == m] for m in islands.MEASURES}
-        assert [int(r["steps"]) for r in by["train_stochastic"]] == [128, 256]
+        assert [int(r["steps"]) for r in by["train_stochastic"]] == [128, 200]
         assert [int(r["steps"]) for r in by["eval_deterministic"]] == [128]
         for m in ("final_stochastic", "final_deterministic", "final_deterministic_noshield"):
             (row,) = by[m]
-            assert int(row["episodes"]) == 5 and int(row["steps"]) == 256
-        # the last-window training measure is the last window's counts (window = final window)
+            assert int(row["episodes"]) == 5 and int(row["steps"]) == 200
+        # the last-window training measure is the last window's counts ((128, 200] both)
         (fin,) = by["train_stochastic_final"]
         assert fin["episodes"] == by["train_stochastic"][-1]["episodes"]
     for r in rows:
@@ -184,9 +185,16 @@ def test_same_seed_same_initial_policy_and_rollout() -> None:
         env = ppo.build_envs(cfg, seeds)
         model = ppo.build_model(cfg, env)
         w = np.concatenate([p.detach().numpy().ravel() for p in model.policy.parameters()])
-        model.learn(64)
-        outs.append((w, model.rollout_buffer.observations.copy()))
+        model.learn(64)  # one rollout of 2 x 32 steps
+        # after training the buffer is flattened env-major: (n_envs * n_steps, obs_dim)
+        obs = model.rollout_buffer.observations.reshape(2, 32, 4).copy()
+        outs.append((w, obs))
         env.close()
+        # SB3 trained on our streams: env i's first episode is the second draw (after the
+        # seeding reset in make_env) of an env built from RunSeeds(seed).env("train", i)
+        for i in range(2):
+            ref = ppo.make_env(cfg, seeds.env("train", i))()
+            np.testing.assert_array_equal(obs[i, 0], ref.reset()[0])
     np.testing.assert_array_equal(outs[0][0], outs[1][0])
     np.testing.assert_array_equal(outs[0][1], outs[1][1])
     assert not np.array_equal(outs[0][0], outs[2][0])

@@ -36,7 +36,9 @@ Writes to ``--out``::
                       (mean over seeds; band: the pooled 95 % interval of the thesis' measure)
     islands_nets.png  the same for the network-size study
     summary.md        the final table (also printed): per configuration the pooled success
-                      and its 95 % interval for each measure, and the per-seed values
+                      and its 95 % interval for each measure (episode noise given the trained
+                      policies, see train.stats), and the per-seed values of the thesis'
+                      measure and of the deterministic policy (the seed-to-seed spread)
 
 ``--quick`` is a smoke-sized run (1 seed, 5000 steps, 2x16 nets, no network study).
 """
@@ -202,6 +204,9 @@ def parse_config(argv: Sequence[str] | None = None) -> BenchConfig:
             problems.append(f"--{name.replace('_', '-')} must be >= 1")
     if bc.eval_every < 0:
         problems.append("--eval-every must be >= 0")
+    if bc.n_envs >= 1 and bc.steps % bc.n_envs:
+        problems.append(f"--steps must be a multiple of --n-envs ({bc.n_envs}): a vector step "
+                        "advances every env")  # fmt: skip
     if problems:
         parser.error("; ".join(problems))
     return bc
@@ -331,8 +336,9 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
             if bc.eval_every and self.num_timesteps >= self.next_eval:
                 res = evaluate(model, val_envs, bc.eval_episodes, normalize=norm)
                 wall = time.perf_counter() - t0
-                rows.append(_row(job, "eval_deterministic", self.next_eval, res, wall))
-                self.next_eval += bc.eval_every
+                rows.append(_row(job, "eval_deterministic", self.num_timesteps, res, wall))
+                while self.next_eval <= self.num_timesteps:
+                    self.next_eval += bc.eval_every
             return True
 
         def _on_rollout_end(self) -> None:
@@ -428,13 +434,16 @@ def _pooled(rows: list[dict[str, Any]], measure: str) -> dict[Config3, dict[int,
 
 
 def _curve(points: dict[int, list]) -> np.ndarray:
-    """steps, mean of the per-seed rates, pooled Wilson low and high."""
+    """steps, pooled success rate (all seeds' episodes), pooled Wilson low and high.
+
+    Pooled, like the summary table: a seed that finishes more episodes in a window weighs
+    more, which is what "the success rate of the training episodes" means; per-seed values
+    are in the CSV and the summary table."""
     out = []
     for s, v in sorted(points.items()):
-        rates = [k / n for _, n, k in v if n]
         n, k = sum(x[1] for x in v), sum(x[2] for x in v)
         lo, hi = wilson_interval(int(k), int(n))
-        out.append([s, np.mean(rates) if rates else np.nan, lo, hi])
+        out.append([s, k / n if n else np.nan, lo, hi])
     return np.array(out, dtype=float)
 
 
@@ -447,8 +456,9 @@ def plot(rows: list[dict[str, Any]], path: Path, nets: bool = False, title: str 
 
     ``nets=False``: the main grid (the most common net), one colour per shield. ``nets=True``:
     the network-size study, one colour per net, for the configurations run with several nets.
-    Solid: the thesis' measure with its pooled 95 % band; dashed with markers: the
-    deterministic policy with the shield (validation during training, held-out at the end).
+    Solid: the thesis' measure, pooled over seeds, with its 95 % band; dashed with markers: the
+    deterministic policy with the shield (validation during training if run, held-out at the
+    end), pooled.
     Returns False (and writes nothing) when there is nothing to draw.
     """
     import matplotlib
@@ -518,9 +528,14 @@ def _cell(points: list) -> str:
     return f"{k / n:.3f} [{lo:.3f}, {hi:.3f}]"
 
 
+def _per_seed(points: list) -> str:
+    return " / ".join(f"{k / n:.3f}" for _, n, k in sorted(points) if n) or "–"
+
+
 def summary_table(rows: list[dict[str, Any]]) -> str:
     """Markdown table: per configuration, each final measure pooled over seeds with its 95 %
-    Wilson interval, and the deterministic (shielded) success of each seed."""
+    Wilson interval, and the per-seed values of the thesis' measure and of the deterministic
+    policy with the shield (seed 1 / 2 / 3)."""
     measures = [
         ("train_stochastic_final", "thesis: stochastic, shield, last training episodes"),
         ("final_stochastic", "stochastic, shield, held-out"),
@@ -529,12 +544,17 @@ def summary_table(rows: list[dict[str, Any]]) -> str:
     ]
     pooled = {m: _pooled(rows, m) for m, _ in measures}
     head = "| map | shield | reward | net | " + " | ".join(t for _, t in measures)
-    head += " | deterministic, shield, per seed |"
-    lines = [head, "|" + "---|" * (5 + len(measures))]
-    keys = sorted(
-        {k for p in pooled.values() for k in p},
+    head += " | thesis measure, per seed | deterministic, shield, per seed |"
+    lines = [head, "|" + "---|" * (6 + len(measures))]
+    keys = {k for p in pooled.values() for k in p}
+    counts: dict[str, int] = defaultdict(int)
+    for k in keys:
+        counts[k[3]] += 1
+    keys = sorted(  # per map: the main grid (the most common net), then the network study
+        keys,
         key=lambda k: (
             list(MAPS).index(k[0]) if k[0] in MAPS else 9,
+            -counts[k[3]],
             list(NETS).index(k[3]) if k[3] in NETS else 9,
             SHIELDS.index(k[1]) if k[1] in SHIELDS else 9,
             k[2],
@@ -542,17 +562,14 @@ def summary_table(rows: list[dict[str, Any]]) -> str:
     )
     for key in keys:
         env_id, shield, reward, net = key
-        cells = []
-        for m, _ in measures:
-            pts = [x for v in pooled[m].get(key, {}).values() for x in v]
-            cells.append(_cell(pts))
-        det = sorted(x for v in pooled["final_deterministic"].get(key, {}).values() for x in v)
-        per_seed = " / ".join(f"{k / n:.3f}" for _, n, k in det if n) or "–"
+        pts = {m: [x for v in pooled[m].get(key, {}).values() for x in v] for m, _ in measures}
+        cells = [_cell(pts[m]) for m, _ in measures]
+        cells += [_per_seed(pts["train_stochastic_final"]), _per_seed(pts["final_deterministic"])]
         size = "x".join(map(str, NETS.get(net, [])))
         lines.append(
             f"| {MAPS.get(env_id, env_id)} | {shield} | {reward} | {size} | "
             + " | ".join(cells)
-            + f" | {per_seed} |"
+            + " |"
         )
     return "\n".join(lines)
 
@@ -605,7 +622,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
 def finish(rows: list[dict[str, Any]], out: Path, note: str) -> str:
     """Charts and summary from the rows (also used to redraw from a CSV)."""
     seeds = len({r["seed"] for r in rows})
-    plot(rows, out / "islands.png", title=f"PPO, {seeds} seed(s): mean; band: pooled 95% CI")
+    plot(
+        rows, out / "islands.png", title=f"PPO, {seeds} seed(s), pooled; band: 95% Wilson interval"
+    )
     plot(rows, out / "islands_nets.png", nets=True, title="network size (separate pi/vf nets)")
     table = summary_table(rows)
     (out / "summary.md").write_text(f"{table}\n\n{note}\n")
