@@ -9,7 +9,7 @@ True
 
 from . import gws, planar  # noqa: F401  (registers the methods)
 from .api import available_methods, register, solve
-from .errors import GraspError, MethodError, SolverError
+from .errors import GraspError, MethodError, ModelError, SolverError
 from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, OptimalCommands, Query
 from .solution import Solution
@@ -20,6 +20,7 @@ __all__ = [
     "GraspError",
     "MaxDisturbance",
     "MethodError",
+    "ModelError",
     "OptimalCommands",
     "Query",
     "Solution",

@@ -17,3 +17,8 @@ class MethodError(GraspError):
 
 class SolverError(RuntimeError):
     """A numerical backend failed (status not optimal/infeasible, time-out, ...)."""
+
+
+class ModelError(GraspError):
+    """An invalid optimisation model (stability.mip): bad indices or bounds, an indicator or
+    SOS2 constraint whose big-M reformulation needs a bound that is infinite, ..."""

@@ -1,0 +1,141 @@
+"""Mixed-integer programs for the 3D methods: one model layer, two solvers.
+
+>>> from stability.mip import MipModel, solve
+>>> m = MipModel("toy")
+>>> x = m.add_var(0, 10)
+>>> z = m.add_var(kind="B")
+>>> _ = m.add_indicator(z, [x], [1.0], ">=", 4.0)   # z = 1 => x >= 4
+>>> _ = m.add_constraint([z], [1.0], "==", 1.0)
+>>> m.set_objective([x], [1.0])
+>>> r = solve(m, backend="highs")
+>>> r.status, round(r.objective, 6)
+('optimal', 4.0)
+
+``backend="highs"`` (``highspy``; indicators as big-M from the model's own bounds, SOS2 as
+a logarithmic encoding, :mod:`stability.mip._highs`) or ``"scip"`` (``pyscipopt``; native
+indicator and SOS2 constraints). Both return a :class:`MipResult`; a time-out or a solver
+failure is a status (``"timeout"``, ``"error"``), never an exception from the solver's
+internals and never an unchecked answer: every returned point is measured against the
+model's exact conditions (:meth:`MipModel.violations`) and an "optimal" point that fails
+them is reported as ``"error"``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import MethodError, ModelError
+from .model import INF, MipModel
+
+__all__ = ["BACKENDS", "DEFAULT_BACKEND", "INF", "MipModel", "MipResult", "available_backends",
+           "solve"]  # fmt: skip
+
+BACKENDS = ("highs", "scip")
+DEFAULT_BACKEND = "highs"
+STATUSES = ("optimal", "infeasible", "unbounded", "infeasible_or_unbounded", "timeout", "error")
+
+
+@dataclass
+class MipResult:
+    """The answer of one MIP solve.
+
+    ``status``: one of ``"optimal"``, ``"infeasible"``, ``"unbounded"``,
+    ``"infeasible_or_unbounded"``, ``"timeout"`` (``x`` is the best point found, if any),
+    ``"error"`` (``message`` says why). ``x`` the values of the model's variables,
+    ``objective`` its objective value, ``bound`` the solver's dual bound, ``violations`` the
+    exact-condition check of ``x`` (:meth:`MipModel.violations`), ``time_s`` the wall time
+    of build and solve, ``nodes`` branch-and-bound nodes.
+    """
+
+    status: str
+    backend: str
+    x: NDArray[np.float64] | None = None
+    objective: float | None = None
+    bound: float = math.nan
+    time_s: float = 0.0
+    nodes: int = 0
+    message: str = ""
+    violations: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def optimal(self) -> bool:
+        return self.status == "optimal"
+
+
+def available_backends() -> list[str]:
+    """The backends whose solver package is installed."""
+    mods = {"highs": "highspy", "scip": "pyscipopt"}
+    return [b for b in BACKENDS if importlib.util.find_spec(mods[b]) is not None]
+
+
+def solve(
+    model: MipModel,
+    backend: str = DEFAULT_BACKEND,
+    time_limit: float | None = None,
+    verbose: bool = False,
+    gap: float = 1e-9,
+    tol: float = 1e-6,
+) -> MipResult:
+    """Solve ``model`` with ``backend``; see :class:`MipResult`.
+
+    Args:
+        time_limit: seconds (``None``: no limit); reaching it gives ``status="timeout"``.
+        verbose: the solver's own log on stdout (off by default).
+        gap: relative and absolute optimality gap at which the solver may stop (both
+            backends get the same).
+        tol: largest violation of the exact conditions a returned point may have, relative
+            to ``1 + max|x|``.
+
+    Raises:
+        MethodError: an unknown backend, or one whose package is not installed.
+        ModelError: a model the backend cannot state (e.g. an indicator over an unbounded
+            variable for HiGHS' big-M).
+    """
+    if backend not in BACKENDS:
+        raise MethodError(f"unknown MIP backend {backend!r}; choose one of {BACKENDS}")
+    if backend not in available_backends():
+        pkg = {"highs": "highspy", "scip": "pyscipopt"}[backend]
+        raise MethodError(
+            f"MIP backend {backend!r} needs the {pkg!r} package, which is not installed "
+            f"(pip install {pkg}); available: {available_backends()}"
+        )
+    if time_limit is not None and not (math.isfinite(time_limit) and time_limit >= 0):
+        raise ModelError(f"time_limit must be a finite number of seconds >= 0, got {time_limit}")
+    if not (0 <= gap < 1) or not (tol > 0):
+        raise ModelError(f"need 0 <= gap < 1 and tol > 0, got gap={gap}, tol={tol}")
+    if backend == "highs":
+        from ._highs import solve_highs as run
+    else:
+        from ._scip import solve_scip as run
+    try:
+        raw = run(model, time_limit, verbose, gap)
+    except ModelError:
+        raise
+    except Exception as e:  # a solver's internal failure is a status, not a traceback
+        return MipResult("error", backend, message=f"{backend} failed: {type(e).__name__}: {e}")
+    res = MipResult(
+        raw["status"],
+        backend,
+        raw["x"],
+        raw["objective"],
+        raw["bound"],
+        raw["time_s"],
+        raw["nodes"],
+        raw["message"],
+    )
+    if res.x is not None:
+        res.violations = model.violations(res.x)
+        worst = max(res.violations.values())
+        if worst > tol * (1.0 + float(np.max(np.abs(res.x), initial=0.0))):
+            bad = {k: v for k, v in res.violations.items() if v > 0}
+            if res.status == "optimal":
+                res.status = "error"
+                res.message = f"{backend}'s answer fails the exact conditions: {bad}"
+            else:  # a time-out's incumbent that fails them is no incumbent
+                res.x, res.objective = None, None
+    return res
