@@ -21,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from envs.geometry import Box, Disc, Piece, point_depth, signed_distance
+from envs.geometry import Box, Disc, Piece, point_depth, point_signed_distance, signed_distance
 
 __all__ = [
     "DEFAULT_BRIDGES",
@@ -289,12 +289,7 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def _depth(self, x: float, y: float) -> float:
         """``safe_distance((x, y))`` in floats: the same value to the last bit, no arrays."""
-        best = -math.inf
-        for piece in self.safe_pieces:
-            d = point_depth(piece, x, y)
-            if d > best:
-                best = d
-        return best
+        return point_signed_distance(self.safe_pieces, x, y)
 
     # ---- Gymnasium API ----------------------------------------------------------------
 

@@ -46,6 +46,7 @@ Writes to ``--out``::
 from __future__ import annotations
 
 import csv
+import math
 import multiprocessing as mp
 import sys
 import time
@@ -439,12 +440,23 @@ def _curve(points: dict[int, list]) -> np.ndarray:
     Pooled, like the summary table: a seed that finishes more episodes in a window weighs
     more, which is what "the success rate of the training episodes" means; per-seed values
     are in the CSV and the summary table."""
-    out = []
-    for s, v in sorted(points.items()):
-        n, k = sum(x[1] for x in v), sum(x[2] for x in v)
-        lo, hi = wilson_interval(int(k), int(n))
-        out.append([s, k / n if n else np.nan, lo, hi])
-    return np.array(out, dtype=float)
+    return np.array([[s, *_pool(v)] for s, v in sorted(points.items())], dtype=float)
+
+
+def _pool(points: list) -> tuple[float, float, float]:
+    """Pooled success rate of ``(seed, episodes, successes)`` entries and its 95 % Wilson
+    interval (nan without episodes)."""
+    n, k = sum(x[1] for x in points), sum(x[2] for x in points)
+    lo, hi = wilson_interval(int(k), int(n))
+    return (k / n if n else math.nan), lo, hi
+
+
+def _main_net(keys: set[Config3] | dict[Config3, Any]) -> str:
+    """The net of most configurations (the main grid's; the others are the network study)."""
+    counts: dict[str, int] = defaultdict(int)
+    for key in keys:
+        counts[key[3]] += 1
+    return max(counts, key=counts.get) if counts else ""
 
 
 COLOURS = {"none": "tab:red", "simple": "tab:blue", "smart": "tab:green"}
@@ -470,10 +482,7 @@ def plot(rows: list[dict[str, Any]], path: Path, nets: bool = False, title: str 
     det = _pooled(rows, "eval_deterministic")
     for key, pts in _pooled(rows, "final_deterministic").items():
         det[key].update(pts)
-    counts: dict[str, int] = defaultdict(int)
-    for key in train:
-        counts[key[3]] += 1
-    main_net = max(counts, key=counts.get) if counts else ""
+    main_net = _main_net(train)
     if nets:
         groups = defaultdict(set)
         for e, s, r, n in train:
@@ -521,11 +530,8 @@ def plot(rows: list[dict[str, Any]], path: Path, nets: bool = False, title: str 
 
 
 def _cell(points: list) -> str:
-    n, k = sum(x[1] for x in points), sum(x[2] for x in points)
-    if n == 0:
-        return "–"
-    lo, hi = wilson_interval(int(k), int(n))
-    return f"{k / n:.3f} [{lo:.3f}, {hi:.3f}]"
+    rate, lo, hi = _pool(points)
+    return "–" if math.isnan(rate) else f"{rate:.3f} [{lo:.3f}, {hi:.3f}]"
 
 
 def _per_seed(points: list) -> str:
@@ -547,14 +553,12 @@ def summary_table(rows: list[dict[str, Any]]) -> str:
     head += " | thesis measure, per seed | deterministic, shield, per seed |"
     lines = [head, "|" + "---|" * (6 + len(measures))]
     keys = {k for p in pooled.values() for k in p}
-    counts: dict[str, int] = defaultdict(int)
-    for k in keys:
-        counts[k[3]] += 1
-    keys = sorted(  # per map: the main grid (the most common net), then the network study
+    main_net = _main_net(keys)
+    keys = sorted(  # per map: the main grid, then the network study
         keys,
         key=lambda k: (
             list(MAPS).index(k[0]) if k[0] in MAPS else 9,
-            -counts[k[3]],
+            k[3] != main_net,
             list(NETS).index(k[3]) if k[3] in NETS else 9,
             SHIELDS.index(k[1]) if k[1] in SHIELDS else 9,
             k[2],

@@ -36,6 +36,7 @@ __all__ = ["BACKENDS", "DEFAULT_BACKEND", "INF", "MipModel", "MipResult", "avail
            "solve"]  # fmt: skip
 
 BACKENDS = ("highs", "scip")
+_PACKAGES = {"highs": "highspy", "scip": "pyscipopt"}  # the package each backend needs
 DEFAULT_BACKEND = "highs"
 STATUSES = ("optimal", "infeasible", "unbounded", "infeasible_or_unbounded", "timeout", "error")
 
@@ -69,8 +70,7 @@ class MipResult:
 
 def available_backends() -> list[str]:
     """The backends whose solver package is installed."""
-    mods = {"highs": "highspy", "scip": "pyscipopt"}
-    return [b for b in BACKENDS if importlib.util.find_spec(mods[b]) is not None]
+    return [b for b in BACKENDS if importlib.util.find_spec(_PACKAGES[b]) is not None]
 
 
 def solve(
@@ -99,7 +99,7 @@ def solve(
     if backend not in BACKENDS:
         raise MethodError(f"unknown MIP backend {backend!r}; choose one of {BACKENDS}")
     if backend not in available_backends():
-        pkg = {"highs": "highspy", "scip": "pyscipopt"}[backend]
+        pkg = _PACKAGES[backend]
         raise MethodError(
             f"MIP backend {backend!r} needs the {pkg!r} package, which is not installed "
             f"(pip install {pkg}); available: {available_backends()}"

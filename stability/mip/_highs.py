@@ -47,9 +47,7 @@ def reformulate(model: MipModel) -> MipModel:
     for r in model.rows:
         out.add_row(r.idx, r.val, r.lo, r.hi, r.name)
     for ind in model.indicators:
-        parts = {"<=": [1.0], ">=": [-1.0], "==": [1.0, -1.0]}[ind.sense]
-        for sign in parts:
-            a, b = sign * ind.val, sign * ind.rhs  # z = active => a.x <= b
+        for a, b in ind.as_le():  # z = active => a.x <= b
             _, top = model.activity_bounds(ind.idx, a)
             if not math.isfinite(top):
                 free = [

@@ -56,10 +56,9 @@ def solve_scip(
         if math.isfinite(r.hi):
             m.addCons(e <= r.hi, name=r.name + ".hi")
     for ind in model.indicators:
-        parts = {"<=": [1.0], ">=": [-1.0], "==": [1.0, -1.0]}[ind.sense]
-        for k, sign in enumerate(parts):
+        for k, (a, b) in enumerate(ind.as_le()):
             m.addConsIndicator(
-                expr(ind.idx, sign * ind.val) <= sign * ind.rhs,
+                expr(ind.idx, a) <= b,
                 binvar=x[ind.z],
                 activeone=ind.active == 1,
                 name=f"{ind.name}.{k}",

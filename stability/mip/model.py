@@ -61,6 +61,11 @@ class Indicator:
     rhs: float
     name: str
 
+    def as_le(self) -> list[tuple[NDArray[np.float64], float]]:
+        """The implied row as ``a.x <= b`` parts: one for ``<=``/``>=``, two for ``==``."""
+        signs = {"<=": (1.0,), ">=": (-1.0,), "==": (1.0, -1.0)}[self.sense]
+        return [(sign * self.val, sign * self.rhs) for sign in signs]
+
 
 @dataclass(frozen=True)
 class Sos2:
@@ -275,8 +280,8 @@ class MipModel:
         for ind in self.indicators:
             if round(x[ind.z]) != ind.active:
                 continue
-            a = float(ind.val @ x[ind.idx]) - ind.rhs
-            viol = {"<=": a, ">=": -a, "==": abs(a)}[ind.sense]
+            xi = x[ind.idx]
+            viol = max(float(a @ xi) - b for a, b in ind.as_le())
             out["indicators"] = max(out["indicators"], viol)
         for s in self.sos2:
             v = np.abs(x[s.idx])
