@@ -21,6 +21,9 @@ def model_residuals(
     motion: NDArray[np.float64] | None = None,
     preload: NDArray[np.float64] | None = None,
     hand_motion: NDArray[np.float64] | None = None,
+    actuator_forces: NDArray[np.float64] | None = None,
+    commands: NDArray[np.float64] | None = None,
+    hand_reference: NDArray[np.float64] | None = None,
 ) -> dict[str, float]:
     """Violation of every model condition by ``(forces, motion)``; all are 0 for a solution.
 
@@ -32,6 +35,21 @@ def model_residuals(
     * ``max_dissipation`` (needs ``motion``): ``max(c_t . d_t + mu c_n |d_t|)``,
       zero iff friction opposes sliding at full magnitude (thesis eq. cone);
       non-negative whenever the cone holds.
+
+    Hand conditions (thesis eqs. hand_eq .. underactuation), for a grasp with ``J``, when
+    ``actuator_forces`` ``f`` are given (``R`` defaults to the identity, ``commands`` ``f_c``
+    to 0):
+
+    * ``hand_equilibrium``: ``max |J^T c - R f|`` [N m or N per joint].
+    * ``actuator_command``: ``max(0, f_c - f)``: an actuator never gives less than its
+      command.
+    * ``nonbackdrivable`` (needs ``hand_motion`` ``q``): ``max(0, -v)`` with transmission
+      motion ``v = R^T (q - q_ref)``: no transmission runs backwards. ``q_ref``
+      (``hand_reference``) is where the actuators lock, 0 unless the method applied a
+      commanded preload first (``iterative``).
+    * ``actuator_complementarity`` (needs ``q``): ``max min(f - f_c, v)`` over the
+      actuators where both are >= 0: an actuator that moves gives exactly its command; one
+      loaded beyond its command is locked. Transmission motion is virtual, like ``r``.
     """
     k = grasp.dim
     c = np.asarray(forces, dtype=float).reshape(grasp.m, k)
@@ -52,6 +70,20 @@ def model_residuals(
         res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - dn))))
         diss = np.einsum("ij,ij->i", ct, dt) + grasp.mu * cn * np.linalg.norm(dt, axis=1)
         res["max_dissipation"] = float(np.max(np.abs(diss)))
+    if actuator_forces is not None and grasp.J is not None:
+        f = np.asarray(actuator_forces, dtype=float)
+        R = np.eye(grasp.J.shape[1]) if grasp.R is None else grasp.R
+        fc = np.zeros(R.shape[1]) if commands is None else np.asarray(commands, dtype=float)
+        res["hand_equilibrium"] = float(np.max(np.abs(grasp.J.T @ c.reshape(-1) - R @ f)))
+        res["actuator_command"] = float(np.max(np.maximum(0.0, fc - f), initial=0.0))
+        if hand_motion is not None:
+            q = np.asarray(hand_motion, dtype=float)
+            if hand_reference is not None:
+                q = q - np.asarray(hand_reference, dtype=float)
+            v = R.T @ q
+            res["nonbackdrivable"] = float(np.max(np.maximum(0.0, -v), initial=0.0)) + 0.0
+            both = np.minimum(np.maximum(f - fc, 0.0), np.maximum(v, 0.0))
+            res["actuator_complementarity"] = float(np.max(both, initial=0.0))
     return res
 
 
@@ -61,7 +93,8 @@ class Solution:
 
     Attributes
     ----------
-    stable : bool
+    stable : bool or None
+        None when the method gave no answer (``status`` is not ``"solved"``).
         Existence: an equilibrium exists. MaxDisturbance: some ``s`` in
         ``[0, cap]`` is stable, and ``value`` is the largest such ``s`` (the
         supremum of the stable set along the ray, which need not be an
@@ -79,9 +112,23 @@ class Solution:
         Per-contact state: ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``.
     stats : dict
         At least ``time_s``; methods add counts (states visited, LPs solved, ...).
+    status : str
+        ``"solved"`` (``stable`` is the answer), ``"timeout"`` (the method's ``time_limit``
+        ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap) or
+        ``"error"`` (a backend failed; ``stats["message"]`` says why). Only ``"solved"``
+        carries an answer: the others have ``stable=None``.
+    actuator_forces : (a,) array or None
+        Hands: actuator forces ``f`` with ``J^T c = R f`` [N or N m].
+    hand_reference : (l,) array or None
+        Hands: the joint motion ``q_ref`` where the nonbackdrivable actuators lock
+        (``R^T (q - q_ref) >= 0``); None means 0 (commands and disturbance applied at once).
+    conditions : tuple of str or None
+        The :func:`model_residuals` keys the method enforces, which :meth:`max_residual`
+        checks (None: all of them). A baseline that drops a condition (``no_mdp`` has no
+        maximum dissipation) still reports its residual, so the difference is visible.
     """
 
-    stable: bool
+    stable: bool | None
     method: str
     grasp: Grasp
     query: Query
@@ -91,6 +138,10 @@ class Solution:
     value: float | None = None
     states: NDArray[np.str_] | None = None
     stats: dict[str, Any] = field(default_factory=dict)
+    status: str = "solved"
+    actuator_forces: NDArray[np.float64] | None = None
+    hand_reference: NDArray[np.float64] | None = None
+    conditions: tuple[str, ...] | None = None
 
     @property
     def wrench(self) -> NDArray[np.float64]:
@@ -111,13 +162,25 @@ class Solution:
         if self.forces is None:
             raise ValueError(f"no forces to check: the {self.method!r} answer is unstable")
         q = self.query
-        preload = None
+        preload = commands = None
         if isinstance(q, Existence | MaxDisturbance) and self.motion is not None:
             preload = self.grasp.per_contact(q.preload, "preload")
+        if isinstance(q, Existence | MaxDisturbance) and q.commands is not None:
+            commands = np.asarray(q.commands, dtype=float)
         return model_residuals(
-            self.grasp, self.wrench, self.forces, self.motion, preload, self.hand_motion
+            self.grasp,
+            self.wrench,
+            self.forces,
+            self.motion,
+            preload,
+            self.hand_motion,
+            self.actuator_forces,
+            commands,
+            self.hand_reference,
         )
 
     def max_residual(self) -> float:
-        """Largest entry of :meth:`residuals`."""
-        return max(self.residuals().values())
+        """Largest entry of :meth:`residuals` among the method's enforced ``conditions``."""
+        res = self.residuals()
+        keys = res if self.conditions is None else [k for k in self.conditions if k in res]
+        return max(res[k] for k in keys)

@@ -293,6 +293,36 @@ class MipModel:
             out["sos2"] = max(out["sos2"], float(rest.max(initial=0.0)))
         return out
 
+    def fixed(self, x: ArrayLike) -> MipModel:
+        """The LP left when the integer variables are fixed at ``round(x)``: indicators whose
+        binary is at its active value become rows, the others are dropped, and SOS2 members
+        outside the adjacent pair that carries most of ``|x|`` are fixed to 0. Same variables,
+        same indices: a solution of it satisfies this model's conditions exactly (up to the LP
+        solver's tolerance), which is how a big-M answer is polished."""
+        x = np.asarray(x, dtype=float)
+        out = MipModel(self.name + " (integers fixed)")
+        out.lb, out.ub = list(self.lb), list(self.ub)
+        out.kind = ["C"] * self.n_vars
+        out.var_names = list(self.var_names)
+        out.rows = list(self.rows)
+        for j, k in enumerate(self.kind):
+            if k != "C":
+                out.lb[j] = out.ub[j] = float(np.round(x[j]))
+        for ind in self.indicators:
+            if round(x[ind.z]) == ind.active:
+                out.add_constraint(ind.idx, ind.val, ind.sense, ind.rhs, ind.name)
+        for s in self.sos2:
+            v = np.abs(x[s.idx])
+            if len(v) <= 2:
+                continue
+            k = int(np.argmax(v[:-1] + v[1:]))
+            for j in np.delete(s.idx, [k, k + 1]):
+                if out.lb[j] <= 0.0 <= out.ub[j]:  # else the LP is infeasible, as it should be
+                    out.lb[j] = out.ub[j] = 0.0
+        out.objective = self.objective.copy()
+        out.maximize, out.offset = self.maximize, self.offset
+        return out
+
     def summary(self) -> str:
         kinds = {k: self.kind.count(k) for k in KINDS}
         return (

@@ -1,0 +1,151 @@
+"""What the MIP methods (``no_mdp``, ``iterative``, ``refinement``) share: options, the
+query's data, one solve with deadline, and the Solution they return."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import mip
+from .errors import GraspError
+from .exact import ExactPoint, ExactProblem, hand_data
+from .grasp import Grasp
+from .queries import Existence, MaxDisturbance, Query, checked_direction_cap
+from .solution import Solution
+
+# the model_residuals keys every exact-model method enforces (not max_dissipation)
+HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
+                   "actuator_complementarity")  # fmt: skip
+CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS)
+
+
+@dataclass
+class MipOptions:
+    """Options of every MIP method: ``backend`` (``"highs"`` or ``"scip"``), ``time_limit``
+    [s] for the whole method call (None: none), ``verbose`` (the solver's log), ``edges``
+    (friction polygon sides, spatial contacts), ``bound_factor`` (model bounds as a multiple
+    of the problem's force scale, :func:`stability.exact.scale_bounds`)."""
+
+    backend: str = mip.DEFAULT_BACKEND
+    time_limit: float | None = None
+    verbose: bool = False
+    edges: int = 8
+    bound_factor: float = 100.0
+
+    def __post_init__(self) -> None:
+        if self.backend not in mip.BACKENDS:
+            raise GraspError(f"unknown MIP backend {self.backend!r}; choose one of {mip.BACKENDS}")
+        if self.backend not in mip.available_backends():
+            mip.solve(mip.MipModel(), backend=self.backend)  # raises the install hint
+        if self.time_limit is not None:
+            try:
+                t = float(self.time_limit)
+            except (TypeError, ValueError) as exc:
+                raise GraspError(f"time_limit must be seconds, got {self.time_limit!r}") from exc
+            if not (math.isfinite(t) and t >= 0):
+                raise GraspError(f"time_limit must be finite and >= 0 s, got {self.time_limit!r}")
+            self.time_limit = t
+        if not isinstance(self.edges, int | np.integer) or self.edges < 3:
+            raise GraspError(f"edges must be an integer >= 3, got {self.edges!r}")
+        self.deadline = None if self.time_limit is None else time.perf_counter() + self.time_limit
+
+    def remaining(self) -> float | None:
+        """Seconds left before the deadline (None: no limit; 0 when passed)."""
+        if self.deadline is None:
+            return None
+        return max(0.0, self.deadline - time.perf_counter())
+
+
+@dataclass
+class QueryData:
+    """A validated Existence / MaxDisturbance query: wrench or (direction, cap), preload,
+    hand ``(R, f_c)``."""
+
+    wrench: NDArray[np.float64] | None
+    direction: NDArray[np.float64] | None
+    cap: float
+    preload: NDArray[np.float64]
+    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+
+    @classmethod
+    def of(cls, grasp: Grasp, query: Query) -> QueryData:
+        preload = grasp.per_contact(query.preload, "preload")
+        hand = hand_data(grasp, query.commands)
+        if isinstance(query, Existence):
+            return cls(grasp.wrench(query.wrench), None, 0.0, preload, hand)
+        d, cap = checked_direction_cap(grasp, query)
+        return cls(None, d, cap, preload, hand)
+
+    @property
+    def wrench_max(self) -> NDArray[np.float64]:
+        return self.wrench if self.direction is None else self.cap * self.direction
+
+
+class Stop(Exception):
+    """A MIP gave no answer (time-out or solver error): ends the method with that status."""
+
+    def __init__(self, status: str, message: str) -> None:
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> ExactPoint | None:
+    """Solve ``problem.model``; the point, None when infeasible; :class:`Stop` otherwise."""
+    left = opts.remaining()
+    if left is not None and left <= 0.0:
+        raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
+    res = mip.solve(problem.model, backend=opts.backend, time_limit=left, verbose=opts.verbose)
+    stats["mips"] = stats.get("mips", 0) + 1
+    stats["mip_time_s"] = stats.get("mip_time_s", 0.0) + res.time_s
+    stats["nodes"] = stats.get("nodes", 0) + res.nodes
+    if res.status == "optimal":
+        return problem.point(res.x)
+    if res.status in ("infeasible", "infeasible_or_unbounded"):
+        return None
+    if res.status == "timeout":
+        raise Stop("timeout", f"time_limit {opts.time_limit} s reached ({res.message})")
+    raise Stop("error", f"{opts.backend}: {res.status}: {res.message}")
+
+
+def solution(
+    method: str,
+    grasp: Grasp,
+    query: Query,
+    stable: bool | None,
+    stats: dict[str, Any],
+    problem: ExactProblem | None = None,
+    pt: ExactPoint | None = None,
+    value: float | None = None,
+    status: str = "solved",
+    conditions: tuple[str, ...] = CONDITIONS,
+) -> Solution:
+    """A :class:`Solution` from an exact-model point (or none)."""
+    sol = Solution(stable, method, grasp, query, value=value, stats=stats, status=status,
+                   conditions=conditions)  # fmt: skip
+    if pt is not None and problem is not None:
+        sol.forces, sol.motion = pt.forces, pt.motion
+        sol.hand_motion, sol.actuator_forces = pt.hand_motion, pt.actuator_forces
+        sol.hand_reference = problem.hand_reference
+        sol.states = problem.states(pt)
+        stats["at_bound"] = pt.at_bound
+    return sol
+
+
+def stopped(method: str, grasp: Grasp, query: Query, stats: dict[str, Any], e: Stop) -> Solution:
+    stats["message"] = e.message
+    return Solution(None, method, grasp, query, stats=stats, status=e.status)
+
+
+def bounds_stats(problem: ExactProblem, stats: dict[str, Any]) -> None:
+    b = problem.bounds
+    stats["force_bound"] = b.force
+    stats["force_scale"] = b.scale
+
+
+__all__ = ["CONDITIONS", "MaxDisturbance", "MipOptions", "QueryData", "Stop", "run", "solution",
+           "stopped"]  # fmt: skip

@@ -1,0 +1,243 @@
+"""``method="iterative"``: the thesis' movement-constrained scheme (ch. 5, sec. iterative).
+
+Object equilibrium is dropped; instead each step solves the *movement constrained
+existence problem* (thesis Algorithm iterative): the exact model
+(:class:`~stability.exact.ExactProblem`: springs, nonbackdrivable actuators, friction cone)
+with the object's motion restricted to a ray along the previous net wrench,
+
+    r^k = r^{k-1} + s M^{-1} w^{k-1},   0 <= s <= gamma            (eq. movement)
+
+minimising the net wrench ``w^k = w + G c^k`` (its 1-norm, torques divided by the grasp
+size ``L``, so a MILP). The outer loop (Algorithm loop) starts at ``r^0``, ``w^0 = w`` and
+stops once ``|w^{k-1} - w^k| < epsilon``; the grasp is stable when the converged net wrench
+is below ``net_tol`` (the thesis' 1e-3 N). An iteration cap reached first is the status
+``"not_converged"`` with ``stable=None``, never a guess.
+
+Commands are applied first: the scheme runs with ``w = 0`` from ``r = 0`` to the commanded
+preload's state ``(r_pre, q_pre)`` (``stats["preload_trace"]``), then with the disturbance
+from ``r_pre``, the nonbackdrivable transmissions now locking where the preload left them:
+``R^T (q - q_pre) >= 0`` (``Solution.hand_reference = q_pre``). In the thesis' one-shot
+model (``no_mdp``) they lock at ``q = 0``, so a transmission loaded beyond its command must
+first return to where the springs were at rest, a jump this scheme's small object steps
+cannot make. ``MaxDisturbance`` bisects on ``s`` in ``[0, cap]``: ``cap`` first, then a
+decade search down from it, then bisection until ``hi - lo <= rtol * hi + atol``
+(``bisection_rtol = 1e-3``, ``atol = 1e-9 cap``); the result is the largest stable ``s``
+found (a lower bound within that tolerance of the stability boundary of the scheme).
+
+Units and the metric ``M``: springs have unit stiffness, so motion is measured in newtons.
+The thesis moves the object along ``w^{k-1}`` itself, which mixes N and N m; here the
+rotation part is divided by ``L^2`` (``M = diag(1, 1, 1, L^2, L^2, L^2)``: a torque ``tau``
+turns a grasp of size ``L`` by about ``tau / L^2``), and ``L = 1`` gives the thesis' scheme
+exactly (option ``length_scale``). ``gamma = 1`` lets one step fully load a single spring.
+
+The scheme has no convergence guarantee (thesis) and is not the exact problem's answer: it
+approximates maximum dissipation by letting the object move only where it is pushed. It is
+right where ``no_mdp`` is wrong (the wedge) and agrees with the exact planar solver on the
+thesis' table; see ``tests/test_mip_methods.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._mipcommon import MipOptions, QueryData, Stop, run, solution, stopped
+from .api import register
+from .errors import GraspError
+from .exact import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
+from .grasp import Grasp
+from .queries import Existence, MaxDisturbance
+from .solution import Solution
+
+__all__: list[str] = []
+
+_ITER_OPTIONS = ("gamma", "epsilon", "net_tol", "max_iter", "length_scale", "bisection_rtol")
+
+
+class _Scheme:
+    """One grasp, one set of commands: runs Algorithm loop for any applied wrench."""
+
+    def __init__(
+        self,
+        grasp: Grasp,
+        data: QueryData,
+        opts: MipOptions,
+        bounds: ExactBounds,
+        gamma: float,
+        epsilon: float,
+        net_tol: float,
+        max_iter: int,
+        L: float,
+        stats: dict[str, Any],
+    ) -> None:
+        self.grasp, self.data, self.opts, self.bounds = grasp, data, opts, bounds
+        self.gamma, self.epsilon, self.net_tol, self.max_iter = gamma, epsilon, net_tol, max_iter
+        k = 2 if grasp.planar else 3
+        nw = grasp.wrench_dim
+        self.weights = np.r_[np.ones(k), np.full(nw - k, 1.0 / L)]  # wrench -> force units
+        self.metric = np.r_[np.ones(k), np.full(nw - k, 1.0 / L**2)]  # wrench -> motion
+        self.stats = stats
+        self.q_ref: NDArray[np.float64] | None = None  # where the actuators lock
+
+    def norm(self, w: NDArray[np.float64]) -> float:
+        return float(np.linalg.norm(self.weights * w))
+
+    def step(
+        self, w: NDArray[np.float64], r_prev: NDArray[np.float64], w_prev: NDArray[np.float64]
+    ) -> tuple[ExactProblem, ExactPoint | None, float]:
+        """Algorithm iterative: the movement constrained existence problem."""
+        prob = ExactProblem(self.grasp, self.data.preload, self.data.hand, self.bounds,
+                            self.opts.edges, name="iterative step",
+                            hand_reference=self.q_ref)  # fmt: skip
+        prob.add_net_wrench(w, self.weights)
+        s = prob.add_motion_ray(r_prev, self.metric * w_prev, self.gamma)
+        pt = run(prob, self.opts, self.stats)
+        return prob, pt, (math.nan if pt is None else float(pt.x[s]))
+
+    def loop(
+        self, w: NDArray[np.float64], r0: NDArray[np.float64]
+    ) -> tuple[str, ExactProblem | None, ExactPoint | None, list[dict[str, float]]]:
+        """Algorithm loop from ``r0``: ``(outcome, problem, point, trace)`` with outcome
+        ``"stable"``, ``"unstable"``, ``"infeasible"`` (no hand equilibrium on the ray: the
+        commands cannot be balanced) or ``"not_converged"``."""
+        r_prev, w_prev = r0, w
+        trace: list[dict[str, float]] = []
+        for _ in range(self.max_iter):
+            prob, pt, s = self.step(w, r_prev, w_prev)
+            if pt is None:
+                return "infeasible", None, None, trace
+            w_k = self.grasp.G @ pt.forces.reshape(-1) + w
+            net = self.norm(w_k)
+            trace.append({"net": net, "step": s})
+            if self.norm(w_prev - w_k) < self.epsilon:
+                return ("stable" if net < self.net_tol else "unstable"), prob, pt, trace
+            r_prev, w_prev = pt.motion, w_k
+        return "not_converged", prob, pt, trace
+
+
+def _options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    it = {k: options.pop(k) for k in list(options) if k in _ITER_OPTIONS}
+    gamma = float(it.get("gamma", 1.0))
+    epsilon = float(it.get("epsilon", 1e-6))
+    net_tol = float(it.get("net_tol", 1e-3))
+    rtol = float(it.get("bisection_rtol", 1e-3))
+    max_iter = it.get("max_iter", 100)
+    for name, v in (("gamma", gamma), ("epsilon", epsilon), ("net_tol", net_tol),
+                    ("bisection_rtol", rtol)):  # fmt: skip
+        if not (math.isfinite(v) and v > 0):
+            raise GraspError(f"option {name} must be finite and > 0, got {v!r}")
+    if not isinstance(max_iter, int | np.integer) or max_iter < 1:
+        raise GraspError(f"option max_iter must be a positive integer, got {max_iter!r}")
+    if epsilon >= net_tol:
+        raise GraspError(f"epsilon ({epsilon}) must be below net_tol ({net_tol})")
+    L = it.get("length_scale")
+    if L is not None and not (math.isfinite(float(L)) and float(L) > 0):
+        raise GraspError(f"option length_scale must be finite and > 0 [m], got {L!r}")
+    out = dict(gamma=gamma, epsilon=epsilon, net_tol=net_tol, max_iter=int(max_iter),
+               length_scale=None if L is None else float(L), bisection_rtol=rtol)  # fmt: skip
+    return out, options
+
+
+@register(
+    "iterative",
+    queries=(Existence, MaxDisturbance),
+    planar=True,
+    spatial=True,
+    hand=True,
+    summary="thesis ch. 5: movement-constrained MIP steps along the net wrench (no guarantee)",
+)
+def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
+    it, rest = _options(dict(options))
+    opts = MipOptions(**rest)
+    data = QueryData.of(grasp, query)
+    L = it["length_scale"] or length_scale(grasp)
+    bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
+    stats: dict[str, Any] = {"backend": opts.backend, "length_scale": L}
+    stats["force_bound"], stats["force_scale"] = bounds.force, bounds.scale
+    sch = _Scheme(grasp, data, opts, bounds, it["gamma"], it["epsilon"], it["net_tol"],
+                  it["max_iter"], L, stats)  # fmt: skip
+    zero = np.zeros(grasp.wrench_dim)
+    try:
+        # the commanded preload first (Algorithm loop with w = 0 from r = 0)
+        out, prob, pt, trace = sch.loop(zero, zero)
+        stats["preload_trace"] = trace
+        if out != "stable":
+            stats["reason"] = f"the commanded preload alone is {out.replace('_', ' ')}"
+            if out == "not_converged":
+                return solution("iterative", grasp, query, None, stats, status="not_converged")
+            if data.direction is not None:
+                stats["capped"] = False
+            return solution("iterative", grasp, query, False, stats)
+        r_pre = pt.motion
+        sch.q_ref = pt.hand_motion  # the transmissions lock where the preload left them
+        if data.direction is None:
+            out, prob, pt, trace = sch.loop(data.wrench, r_pre)
+            stats["trace"], stats["iterations"] = trace, len(trace)
+            if out == "not_converged":
+                return solution("iterative", grasp, query, None, stats, status="not_converged")
+            if out != "stable":
+                return solution("iterative", grasp, query, False, stats)
+            return solution("iterative", grasp, query, True, stats, prob, pt)
+        return _bisect(sch, grasp, query, data, (prob, pt, trace), stats, it["bisection_rtol"])
+    except Stop as e:
+        return stopped("iterative", grasp, query, stats, e)
+
+
+def _bisect(sch, grasp, query, data, preload, stats, rtol) -> Solution:
+    """MaxDisturbance: the largest stable ``s`` in ``[0, cap]``, see the module docstring.
+    ``preload`` is the converged ``(problem, point, trace)`` of the commands alone, the
+    answer for ``s = 0``."""
+    cap, d = data.cap, data.direction
+    r_pre = preload[1].motion
+    probes: list[dict[str, Any]] = []
+    best: tuple[float, Any, Any, list] | None = None
+
+    def probe(s: float) -> bool:
+        nonlocal best
+        out, prob, pt, trace = sch.loop(s * d, r_pre)
+        probes.append({"s": s, "outcome": out, "iterations": len(trace)})
+        if out == "not_converged":
+            raise _NotConverged(s)
+        if out == "stable" and (best is None or s > best[0]):
+            best = (s, prob, pt, trace)
+        return out == "stable"
+
+    stats["bisection"] = probes
+    try:
+        if probe(cap):
+            lo, hi = cap, cap
+        else:
+            lo, hi = 0.0, cap
+            s = cap
+            atol = 1e-9 * cap
+            while s > atol:  # decade search down from cap for a stable bracket
+                s /= 10.0
+                if probe(s):
+                    lo = s
+                    break
+                hi = s
+            while hi - lo > rtol * hi + atol:
+                mid = 0.5 * (lo + hi)
+                if probe(mid):
+                    lo = mid
+                else:
+                    hi = mid
+    except _NotConverged as e:
+        stats["reason"] = f"the scheme did not converge at s = {e.s:g}"
+        return solution("iterative", grasp, query, None, stats, status="not_converged")
+    stats["capped"] = bool(best is not None and best[0] >= cap)
+    stats["bracket"] = (lo, hi)
+    if best is None:  # only s = 0, the preload's own state, is stable
+        best = (0.0, *preload)
+    s, prob, pt, trace = best
+    stats["trace"], stats["iterations"] = trace, len(trace)
+    return solution("iterative", grasp, query, True, stats, prob, pt, value=float(s))
+
+
+class _NotConverged(Exception):
+    def __init__(self, s: float) -> None:
+        super().__init__(s)
+        self.s = s
