@@ -54,6 +54,16 @@ class MipOptions:
             raise GraspError(f"edges must be an integer >= 3, got {self.edges!r}")
         self.deadline = None if self.time_limit is None else time.perf_counter() + self.time_limit
 
+    @classmethod
+    def of(cls, method: str, options: dict[str, Any]) -> MipOptions:
+        """Options from ``solve(..., **options)``; an unknown name is a GraspError."""
+        known = set(cls.__dataclass_fields__)
+        bad = sorted(set(options) - known)
+        if bad:
+            raise GraspError(f"unknown option(s) for method {method!r}: {bad}; known: "
+                             f"{sorted(known)}")  # fmt: skip
+        return cls(**options)
+
     def remaining(self) -> float | None:
         """Seconds left before the deadline (None: no limit; 0 when passed)."""
         if self.deadline is None:
@@ -104,12 +114,21 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
     stats["mip_time_s"] = stats.get("mip_time_s", 0.0) + res.time_s
     stats["nodes"] = stats.get("nodes", 0) + res.nodes
     if res.status == "optimal":
-        return problem.point(res.x)
+        x = res.x
+        tidy = problem.tidy(x)
+        if tidy is not None and _certified(problem, tidy):
+            x = tidy
+        return problem.point(x)
     if res.status in ("infeasible", "infeasible_or_unbounded"):
         return None
     if res.status == "timeout":
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached ({res.message})")
     raise Stop("error", f"{opts.backend}: {res.status}: {res.message}")
+
+
+def _certified(problem: ExactProblem, x: NDArray[np.float64], tol: float = 1e-6) -> bool:
+    viol = problem.model.violations(x)
+    return max(viol.values()) <= tol * (1.0 + float(np.max(np.abs(x), initial=0.0)))
 
 
 def solution(

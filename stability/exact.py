@@ -115,6 +115,8 @@ def scale_bounds(
     balances the commanded torque through that joint's lever). ``B = bound_factor * S``
     (``S = 1`` N when nothing loads the grasp); contacts then move by at most ``2 B``, so
     ``V_l = sum_j |R_jl| 2 B / min_j |J_j|``, and ``E = |R^+| |J^T| B (1 + max mu) sqrt(m)``.
+    The motions ``r`` and ``q`` stay unbounded (no indicator row holds them): each answer is
+    the least virtual motion among the optimal ones (:meth:`ExactProblem.tidy`).
     """
     if not (math.isfinite(bound_factor) and bound_factor >= 1.0):
         raise GraspError(f"bound_factor must be a finite number >= 1, got {bound_factor!r}")
@@ -145,6 +147,13 @@ def scale_bounds(
     rp = float(np.linalg.norm(np.linalg.pinv(R), 2)) if R.size else 0.0
     excess = np.full(R.shape[1], max(rp * jt * c_norm, B))
     return ExactBounds(B, motion, excess, S)
+
+
+def _clean(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``A`` with entries below ``1e-12 max|A|`` set to 0 (round-off of frames read from a
+    simulator, e.g. 4e-17 normal components, which a solver would otherwise exploit)."""
+    big = float(np.abs(A).max(initial=0.0))
+    return np.where(np.abs(A) > 1e-12 * big, A, 0.0)
 
 
 @dataclass
@@ -212,8 +221,9 @@ class ExactProblem:
         self.u = M.add_vars(m, 0.0, B, "C", "u")
         self.y = M.add_vars(m, 0, 1, "B", "y")
         self.q = self.f = self.v = self.z = self.hand_reference = None
-        Gt = g.G.T.reshape(m, k, -1)
-        Jn = None if g.J is None else g.J.reshape(m, k, -1)[:, 0, :]
+        Gt = _clean(g.G.T).reshape(m, k, -1)
+        self.J = None if g.J is None else _clean(g.J)
+        Jn = None if g.J is None else self.J.reshape(m, k, -1)[:, 0, :]
         if hand is not None:
             R, fc = hand
             nl, na = R.shape
@@ -235,7 +245,7 @@ class ExactProblem:
         if hand is not None:
             R, fc = hand
             for j in range(R.shape[0]):  # J^T c - R f = 0
-                idx, val = self._extend([], [], self.c.reshape(-1), g.J[:, j])
+                idx, val = self._extend([], [], self.c.reshape(-1), self.J[:, j])
                 idx, val = self._extend(idx, val, self.f, -R[j])
                 M.add_constraint(idx, val, "==", 0.0, f"hand{j}")
             ref = np.zeros(R.shape[1]) if hand_reference is None else R.T @ hand_reference
@@ -275,7 +285,7 @@ class ExactProblem:
     ) -> int | None:  # fmt: skip
         """``G c + wrench + s direction = 0`` (eq. object_eq); with ``direction`` a new
         variable ``s in [0, cap]`` (its index is returned), else None."""
-        M, G = self.model, self.grasp.G
+        M, G = self.model, _clean(self.grasp.G)
         s = None if direction is None else M.add_var(0.0, cap, "C", "s")
         for row in range(G.shape[0]):
             idx, val = self._extend([], [], self.c.reshape(-1), G[row])
@@ -288,7 +298,7 @@ class ExactProblem:
         """Object equilibrium dropped (thesis sec. iterative): the net wrench
         ``G c + wrench = e+ - e-`` is free and the objective is ``sum weights (e+ + e-)``, its
         weighted 1-norm."""
-        M, G = self.model, self.grasp.G
+        M, G = self.model, _clean(self.grasp.G)
         ep = M.add_vars(G.shape[0], 0.0, INF, "C", "e+")
         em = M.add_vars(G.shape[0], 0.0, INF, "C", "e-")
         for row in range(G.shape[0]):
@@ -311,11 +321,53 @@ class ExactProblem:
 
     # ------------------------------------------------------------------ answers
 
+    def tidy(self, x: NDArray[np.float64], rtol: float = 1e-10) -> NDArray[np.float64] | None:
+        """The least-motion point with ``x``'s binaries and objective value: the LP of
+        :meth:`MipModel.fixed` plus ``objective within rtol of x's``, minimising the weighted
+        1-norm of the virtual motion (translations, rotations times ``L``, joint motions
+        times their lever ``|J_j|``: all in contact-displacement units). Motions that load no
+        spring are otherwise arbitrary, and a simplex vertex can put them anywhere. None if
+        the LP fails (the caller keeps ``x``)."""
+        from .mip import solve as mip_solve
+
+        lp = self.model.fixed(x)
+        obj = self.model.objective
+        nz = np.flatnonzero(obj)
+        if nz.size:
+            val = float(obj @ x)
+            slack = rtol * max(1.0, abs(val))
+            if self.model.maximize:
+                lp.add_row(nz, obj[nz], val - slack, INF, "objective")
+            else:
+                lp.add_row(nz, obj[nz], -INF, val + slack, "objective")
+        g = self.grasp
+        kk = 2 if g.planar else 3
+        L = length_scale(g)
+        wr = np.r_[np.ones(kk), np.full(g.wrench_dim - kk, L)]
+        motion, weight = list(self.r), list(wr)
+        if self.q is not None:
+            cols = np.linalg.norm(self.J, axis=0)
+            motion += list(self.q)
+            weight += list(np.where(cols > 0, cols, 1.0))
+        idx, val = [], []
+        for j, w in zip(motion, weight, strict=True):
+            t = lp.add_var(0.0, INF, "C", f"|{lp.var_names[j]}|")  # t >= |x_j|
+            lp.add_row([t, j], [1.0, -1.0], 0.0, INF)
+            lp.add_row([t, j], [1.0, 1.0], 0.0, INF)
+            idx.append(t)
+            val.append(float(w))
+        lp.set_objective(idx, val)
+        res = mip_solve(lp, backend="highs", polish=False)
+        if res.status != "optimal" or res.x is None:
+            return None
+        return res.x[: self.model.n_vars]
+
     def point(self, x: NDArray[np.float64]) -> ExactPoint:
         """The grasp quantities of a model solution ``x``."""
         B = self.bounds.force
         c = x[self.c]
         at = bool(np.any(c[:, 0] >= 0.99 * B) or np.any(x[self.u] >= 0.99 * B))
+
         q = f = z = None
         if self.hand is not None:
             q, f, z = x[self.q], x[self.f], np.round(x[self.z]) == 1

@@ -35,7 +35,7 @@ __all__: list[str] = []
     "(wrong where a virtual rotation wedges the object)",
 )
 def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
-    opts = MipOptions(**options)
+    opts = MipOptions.of("no_mdp", options)
     data = QueryData.of(grasp, query)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
@@ -58,5 +58,7 @@ def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: An
     value = None
     if s is not None:
         value = float(min(data.cap, max(0.0, pt.x[s])))
-        stats["capped"] = bool(value >= data.cap * (1 - 1e-9))
+        if value >= data.cap * (1 - 1e-8):  # the least-motion LP may give up 1e-10 of s
+            value = data.cap
+        stats["capped"] = value == data.cap
     return solution("no_mdp", grasp, query, True, stats, prob, pt, value)

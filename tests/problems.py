@@ -63,8 +63,10 @@ def tendon_finger() -> Grasp:
     two joints are driven by one tendon: ``R = [[0.02], [0.01]]`` (2 x 1).
 
     Normal levers: joint 1 moves the proximal contact by 0.04 and the distal one by 0.03,
-    joint 2 the distal one by 0.025 (plus a small tangential motion). With the tendon moving,
-    hand equilibrium gives ``c_distal = 0.4 f`` and ``c_proximal = 0.2 f``."""
+    joint 2 the distal one by 0.025, both also move their contacts a little along ``t2``
+    (+y), so friction enters hand equilibrium. With the tendon moving and no friction, hand
+    equilibrium alone would give ``c_distal = 0.4 f`` and ``c_proximal = 0.2 f``; a locked
+    tendon still keeps ``J^T c`` parallel to ``R`` (the finger has a free internal mode)."""
     J = np.zeros((9, 2))
     J[3, 0] = 0.04  # proximal contact normal, joint 1
     J[5, 0] = 0.005  # proximal contact t2 (object z), joint 1
