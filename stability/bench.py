@@ -1,4 +1,5 @@
-"""Benchmarks: ``python -m stability.bench planar``.
+"""Benchmarks: ``python -m stability.bench planar`` and ``python -m stability.bench mip``
+(:mod:`stability.bench_mip`).
 
 ``planar`` reproduces the thesis' Table tab:performance (number of slip states
 and enumeration time for m = 2..9 random contacts) side by side with our
@@ -195,12 +196,21 @@ def print_table(rows: list[dict]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m stability.bench", description=__doc__)
-    ap.add_argument("which", choices=["planar"], help="benchmark to run")
+    ap.add_argument("which", choices=["planar", "mip"], help="benchmark to run")
     ap.add_argument("--out", default="bench_out", help="folder for the CSV and PNG")
-    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-    rows = bench_planar(args.repeats, args.seed)
+    if args.which == "mip":
+        from .bench_mip import bench_mip, print_mip_table, write_mip
+
+        rows = bench_mip(args.repeats or 7, args.seed)
+        print_mip_table(rows)
+        csv_path, png = write_mip(rows, Path(args.out))
+        print(f"wrote {csv_path} and {png}")
+        return
+    rows = bench_planar(args.repeats or 15, args.seed)
     print_table(rows)
     csv_path, png = write_planar(rows, Path(args.out))
     print(f"wrote {csv_path} and {png}")
