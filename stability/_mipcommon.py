@@ -118,6 +118,9 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
         tidy = problem.tidy(x)
         if tidy is not None and _certified(problem, tidy):
             x = tidy
+        elif not _certified(problem, x):
+            raise Stop("error", f"{opts.backend}: answer fails the exact conditions "
+                       f"{problem.model.violations(x)} at the model's force scale")  # fmt: skip
         return problem.point(x)
     if res.status in ("infeasible", "infeasible_or_unbounded"):
         return None
@@ -126,9 +129,11 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
     raise Stop("error", f"{opts.backend}: {res.status}: {res.message}")
 
 
-def _certified(problem: ExactProblem, x: NDArray[np.float64], tol: float = 1e-6) -> bool:
+def _certified(problem: ExactProblem, x: NDArray[np.float64], tol: float = 1e-7) -> bool:
+    """``x`` meets the model's exact conditions within ``tol`` times its force bound (not
+    times ``max|x|``: the motions are unbounded and must not widen the tolerance)."""
     viol = problem.model.violations(x)
-    return max(viol.values()) <= tol * (1.0 + float(np.max(np.abs(x), initial=0.0)))
+    return max(viol.values()) <= tol * (1.0 + problem.bounds.force)
 
 
 def solution(

@@ -8,7 +8,12 @@ while the applied force does no work, and friction then "holds" it (thesis Fig. 
 energy is created). It exists to be shown wrong; see ``tests/test_mip_methods.py``.
 
 ``Existence``: is the MIP feasible? ``MaxDisturbance``: maximise ``s in [0, cap]`` with
-``w = s d``. Options: :class:`stability._mipcommon.MipOptions`.
+``w = s d``. Options: :class:`stability._mipcommon.MipOptions`. The model's force bound
+(:func:`~stability.exact.scale_bounds`) can decide an answer (a wedge with a tiny angle
+needs forces far above the load); so an infeasible model, or an answer at a bound, is
+solved once more with a 100x larger bound (``stats["retried_bound_factor"]``), and an
+answer still at a bound says so (``stats["at_bound"]``: the value is then a lower bound
+limited by the model, an "unstable" means none within ``stats["force_bound"]``).
 """
 
 from __future__ import annotations
@@ -37,9 +42,18 @@ __all__: list[str] = []
 def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
     opts = MipOptions.of("no_mdp", options)
     data = QueryData.of(grasp, query)
-    bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
-    prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
     stats: dict[str, Any] = {"backend": opts.backend}
+    sol = _attempt(grasp, query, data, opts, opts.bound_factor, stats)
+    if sol.status == "solved" and (not sol.stable or stats.get("at_bound")):
+        # infeasible or at a bound: the bound may be what decided; once more, 100x larger
+        stats["retried_bound_factor"] = 100.0 * opts.bound_factor
+        sol = _attempt(grasp, query, data, opts, 100.0 * opts.bound_factor, stats)
+    return sol
+
+
+def _attempt(grasp, query, data, opts, bound_factor, stats) -> Solution:
+    bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, bound_factor)
+    prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
     bounds_stats(prob, stats)
     s = None
     if data.direction is None:
@@ -58,7 +72,5 @@ def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: An
     value = None
     if s is not None:
         value = float(min(data.cap, max(0.0, pt.x[s])))
-        if value >= data.cap * (1 - 1e-8):  # the least-motion LP may give up 1e-10 of s
-            value = data.cap
-        stats["capped"] = value == data.cap
+        stats["capped"] = value >= data.cap * (1 - 1e-8)  # the tidy LP may give up 1e-10
     return solution("no_mdp", grasp, query, True, stats, prob, pt, value)

@@ -109,7 +109,8 @@ class Solution:
     value : float or None
         Optimisation queries: the optimum (MaxDisturbance: largest ``s``).
     states : (m,) array of str or None
-        Per-contact state: ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``.
+        Per-contact state: planar ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``;
+        the 3D MIP methods ``"stick"``, ``"slip"`` (tangential motion), ``"detach"``.
     stats : dict
         At least ``time_s``; methods add counts (states visited, LPs solved, ...).
     status : str

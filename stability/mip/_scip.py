@@ -33,6 +33,10 @@ def solve_scip(
         m.setParam("limits/time", float(time_limit))
     m.setParam("limits/gap", float(gap))
     m.setParam("limits/absgap", float(gap))
+    # SCIP's presolve otherwise drops indicator couplings with big coefficients and can
+    # answer "optimal" with a wrong value once the model's bounds reach ~1e4 (measured:
+    # the pinch pushed into a finger with cap 2000 gave 0 instead of the cap)
+    m.setParam("constraints/indicator/maxcouplingvalue", 1e9)
     x = [
         m.addVar(
             name=model.var_names[j],
