@@ -24,20 +24,36 @@ HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
 CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS)
 
 
+# Measured by ``python -m stability.bench mip`` (README, docs/bench/mip.csv): over its 12
+# (case, query) medians SCIP/HiGHS is 1.17 (geometric mean) for no_mdp's one MIP per query
+# and 0.84 for iterative's many small ones; both gave the same answers.
+DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip"}
+
+
+def default_backend(method: str) -> str:
+    """The measured faster backend for ``method`` if installed, else any installed one."""
+    want = DEFAULT_BACKENDS.get(method, mip.DEFAULT_BACKEND)
+    have = mip.available_backends()
+    return want if want in have or not have else have[0]
+
+
 @dataclass
 class MipOptions:
-    """Options of every MIP method: ``backend`` (``"highs"`` or ``"scip"``), ``time_limit``
+    """Options of every MIP method: ``backend`` (``"highs"`` or ``"scip"``; default: the
+    method's measured faster one, :data:`DEFAULT_BACKENDS`), ``time_limit``
     [s] for the whole method call (None: none), ``verbose`` (the solver's log), ``edges``
     (friction polygon sides, spatial contacts), ``bound_factor`` (model bounds as a multiple
     of the problem's force scale, :func:`stability.exact.scale_bounds`)."""
 
-    backend: str = mip.DEFAULT_BACKEND
+    backend: str | None = None
     time_limit: float | None = None
     verbose: bool = False
     edges: int = 8
     bound_factor: float = 100.0
 
     def __post_init__(self) -> None:
+        if self.backend is None:
+            self.backend = mip.DEFAULT_BACKEND
         if self.backend not in mip.BACKENDS:
             raise GraspError(f"unknown MIP backend {self.backend!r}; choose one of {mip.BACKENDS}")
         if self.backend not in mip.available_backends():
@@ -56,12 +72,16 @@ class MipOptions:
 
     @classmethod
     def of(cls, method: str, options: dict[str, Any]) -> MipOptions:
-        """Options from ``solve(..., **options)``; an unknown name is a GraspError."""
+        """Options from ``solve(..., **options)``; an unknown name is a GraspError. The
+        default backend is the method's (:data:`DEFAULT_BACKENDS`)."""
         known = set(cls.__dataclass_fields__)
         bad = sorted(set(options) - known)
         if bad:
             raise GraspError(f"unknown option(s) for method {method!r}: {bad}; known: "
                              f"{sorted(known)}")  # fmt: skip
+        options = dict(options)
+        if options.get("backend") is None:
+            options["backend"] = default_backend(method)
         return cls(**options)
 
     def remaining(self) -> float | None:
