@@ -55,3 +55,9 @@ FINGER_AZIMUTHS = (0.0, np.pi / 2, np.pi, 3 * np.pi / 2)  # [rad] about +z
 LINK_RADIUS = 0.01  # capsule radius of both links (finger breadth 20 mm)
 PROXIMAL_LENGTH = 0.05  # base (j0, j1) to distal joint (j2)
 DISTAL_LENGTH = 0.035  # distal joint to the centre of the hemispherical tip
+
+# Contact skin [MuJoCo solref (timeconst [s], damping ratio), solimp]: the hand's collision
+# class and every scene object carry the same values, so each contact simulates exactly these
+# (MuJoCo mixes a pair's parameters; tests/test_contact_params.py reads them back).
+SKIN_SOLREF = (0.01, 1.0)
+SKIN_SOLIMP = (0.9, 0.9, 0.001, 0.5, 2.0)

@@ -43,3 +43,9 @@ DISTAL_LENGTH = 0.040  # distal link, distal joint to the centre of the tip [m]
 LINK_RADIUS = 0.008  # capsule radius of both links [m]
 JOINT_SPACING = 0.050  # distance between the two proximal joints [m]
 PALM_WIDTH = 0.080  # palm width, visual only [m]
+
+# Contact skin [MuJoCo solref (timeconst [s], damping ratio), solimp]: the hand's collision
+# class and every scene object carry the same values, so each contact simulates exactly these
+# (MuJoCo mixes a pair's parameters; tests/test_contact_params.py reads them back).
+SKIN_SOLREF = (0.005, 1.0)
+SKIN_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
