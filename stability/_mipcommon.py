@@ -13,9 +13,9 @@ from numpy.typing import NDArray
 
 from . import mip
 from .errors import GraspError
-from .exact import ExactPoint, ExactProblem, hand_data
+from .exact import ExactBounds, ExactPoint, ExactProblem, hand_data
 from .grasp import Grasp
-from .queries import Existence, MaxDisturbance, Query, checked_direction_cap
+from .queries import Existence, Query, checked_direction_cap
 from .solution import Solution
 
 # the model_residuals keys every exact-model method enforces (not max_dissipation)
@@ -54,10 +54,7 @@ class MipOptions:
     def __post_init__(self) -> None:
         if self.backend is None:
             self.backend = mip.DEFAULT_BACKEND
-        if self.backend not in mip.BACKENDS:
-            raise GraspError(f"unknown MIP backend {self.backend!r}; choose one of {mip.BACKENDS}")
-        if self.backend not in mip.available_backends():
-            mip.solve(mip.MipModel(), backend=self.backend)  # raises the install hint
+        mip.check_backend(self.backend)
         if self.time_limit is not None:
             try:
                 t = float(self.time_limit)
@@ -185,11 +182,11 @@ def stopped(method: str, grasp: Grasp, query: Query, stats: dict[str, Any], e: S
     return Solution(None, method, grasp, query, stats=stats, status=e.status)
 
 
-def bounds_stats(problem: ExactProblem, stats: dict[str, Any]) -> None:
-    b = problem.bounds
-    stats["force_bound"] = b.force
-    stats["force_scale"] = b.scale
+def bounds_stats(bounds: ExactBounds, stats: dict[str, Any]) -> None:
+    """Record the model's force bound and the force scale it came from in ``stats``."""
+    stats["force_bound"] = bounds.force
+    stats["force_scale"] = bounds.scale
 
 
-__all__ = ["CONDITIONS", "MaxDisturbance", "MipOptions", "QueryData", "Stop", "run", "solution",
-           "stopped"]  # fmt: skip
+__all__ = ["CONDITIONS", "HAND_CONDITIONS", "MipOptions", "QueryData", "Stop", "bounds_stats",
+           "default_backend", "run", "solution", "stopped"]  # fmt: skip

@@ -122,6 +122,15 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
     return rows
 
 
+def write_csv(rows: list[dict], path: Path) -> Path:
+    """``rows`` (dicts with the same keys) as a CSV file with a header; returns ``path``."""
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
 def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
     import matplotlib
 
@@ -129,11 +138,7 @@ def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = out / "planar.csv"
-    with csv_path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    csv_path = write_csv(rows, out / "planar.csv")
     m = [r["m"] for r in rows]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     tm = [r["m"] for r in rows if r["thesis_time_s"]]

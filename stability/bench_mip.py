@@ -22,7 +22,6 @@ times, log scale).
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ import numpy as np
 
 from . import examples as ex
 from .api import solve
+from .bench import write_csv
 from .queries import Existence, MaxDisturbance
 
 METHODS = ("no_mdp", "iterative")
@@ -50,8 +50,7 @@ def _cases(rng: np.random.Generator, repeats: int) -> list[tuple[str, list[tuple
         for _ in range(repeats):
             g = ex.random_fingers(rng, m)
             c = rng.uniform(0.02, 0.1, m)
-            w = rng.normal(size=6) * [1, 1, 1, 0.05, 0.05, 0.05]
-            d = rng.normal(size=6) * [1, 1, 1, 0.05, 0.05, 0.05]
+            w, d = ex.random_wrench(rng), ex.random_wrench(rng)
             reps.append((g, Existence(w, commands=c), MaxDisturbance(d, commands=c, cap=20.0)))
         out.append((f"random {m}", reps))
     return out
@@ -136,11 +135,7 @@ def write_mip(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = out / "mip.csv"
-    with csv_path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    csv_path = write_csv(rows, out / "mip.csv")
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
     cases = list(dict.fromkeys(r["case"] for r in rows))
     x = np.arange(len(cases))

@@ -127,19 +127,15 @@ def scale_bounds(
     if hand is not None:
         R, fc = hand
         cols = np.linalg.norm(grasp.J, axis=0)
-        tau = np.abs(R @ fc)
         live = cols > 1e-12 * max(1.0, float(cols.max(initial=0.0)))
         if np.any(live):
-            S = max(S, float(np.max(tau[live] / cols[live], initial=0.0)))
+            S = max(S, float(np.max(np.abs(R @ fc)[live] / cols[live], initial=0.0)))
     if S <= 0.0:
         S = 1.0
     B = bound_factor * S
     if hand is None:
         return ExactBounds(B, np.zeros(0), np.zeros(0), S)
-    R, fc = hand
-    cols = np.linalg.norm(grasp.J, axis=0)
-    live = cols[cols > 1e-12 * max(1.0, float(cols.max(initial=0.0)))]
-    lever = float(live.min()) if live.size else 1.0
+    lever = float(cols[live].min()) if np.any(live) else 1.0
     motion = np.abs(R).sum(axis=0) * 2.0 * B / lever
     motion = np.where(motion > 0, motion, 2.0 * B / lever)
     c_norm = B * (1.0 + float(grasp.mu.max())) * math.sqrt(grasp.m)
@@ -221,7 +217,8 @@ class ExactProblem:
         self.u = M.add_vars(m, 0.0, B, "C", "u")
         self.y = M.add_vars(m, 0, 1, "B", "y")
         self.q = self.f = self.v = self.z = self.hand_reference = None
-        Gt = _clean(g.G.T).reshape(m, k, -1)
+        self.G = _clean(g.G)  # (wrench_dim, k m), round-off entries zeroed
+        Gt = self.G.T.reshape(m, k, -1)
         self.J = None if g.J is None else _clean(g.J)
         Jn = None if g.J is None else self.J.reshape(m, k, -1)[:, 0, :]
         if hand is not None:
@@ -285,7 +282,7 @@ class ExactProblem:
     ) -> int | None:  # fmt: skip
         """``G c + wrench + s direction = 0`` (eq. object_eq); with ``direction`` a new
         variable ``s in [0, cap]`` (its index is returned), else None."""
-        M, G = self.model, _clean(self.grasp.G)
+        M, G = self.model, self.G
         s = None if direction is None else M.add_var(0.0, cap, "C", "s")
         for row in range(G.shape[0]):
             idx, val = self._extend([], [], self.c.reshape(-1), G[row])
@@ -298,7 +295,7 @@ class ExactProblem:
         """Object equilibrium dropped (thesis sec. iterative): the net wrench
         ``G c + wrench = e+ - e-`` is free and the objective is ``sum weights (e+ + e-)``, its
         weighted 1-norm."""
-        M, G = self.model, _clean(self.grasp.G)
+        M, G = self.model, self.G
         ep = M.add_vars(G.shape[0], 0.0, INF, "C", "e+")
         em = M.add_vars(G.shape[0], 0.0, INF, "C", "e-")
         for row in range(G.shape[0]):

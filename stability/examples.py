@@ -132,3 +132,12 @@ def random_fingers(rng: np.random.Generator, m: int) -> Grasp:
         J[3 * i, i] = rng.uniform(0.04, 0.1)
         J[3 * i + 1 : 3 * i + 3, i] = rng.normal(scale=0.01, size=2)
     return Grasp(pts, n, rng.uniform(0.3, 1.0, m), J=J, R=np.eye(m))
+
+
+RANDOM_WRENCH_SCALE = np.array([1, 1, 1, 0.05, 0.05, 0.05])  # std of forces [N], torques [N m]
+
+
+def random_wrench(rng: np.random.Generator) -> np.ndarray:
+    """A random spatial wrench for the random-finger grasps: forces ~N(0, 1) N, torques
+    ~N(0, 0.05) N m (about a 5 cm grasp's torque per newton)."""
+    return rng.normal(size=6) * RANDOM_WRENCH_SCALE

@@ -52,10 +52,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._mipcommon import MipOptions, QueryData, Stop, run, solution, stopped
+from ._mipcommon import MipOptions, QueryData, Stop, bounds_stats, run, solution, stopped
 from .api import register
 from .errors import GraspError
-from .exact import ExactPoint, ExactProblem, length_scale, scale_bounds
+from .exact import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
 from .grasp import Grasp
 from .queries import Existence, MaxDisturbance
 from .solution import Solution
@@ -81,7 +81,6 @@ class _Scheme:
         stats: dict[str, Any],
     ) -> None:
         self.grasp, self.data, self.opts = grasp, data, opts
-        self.bound_factor = opts.bound_factor
         self.gamma, self.epsilon, self.net_tol, self.max_iter = gamma, epsilon, net_tol, max_iter
         k = 2 if grasp.planar else 3
         nw = grasp.wrench_dim
@@ -94,10 +93,13 @@ class _Scheme:
         return float(np.linalg.norm(self.weights * w))
 
     def step(
-        self, w: NDArray[np.float64], r_prev: NDArray[np.float64], w_prev: NDArray[np.float64]
+        self,
+        w: NDArray[np.float64],
+        bounds: ExactBounds,
+        r_prev: NDArray[np.float64],
+        w_prev: NDArray[np.float64],
     ) -> tuple[ExactProblem, ExactPoint | None, float]:
         """Algorithm iterative: the movement constrained existence problem."""
-        bounds = scale_bounds(self.grasp, w, self.data.preload, self.data.hand, self.bound_factor)
         prob = ExactProblem(self.grasp, self.data.preload, self.data.hand, bounds,
                             self.opts.edges, name="iterative step",
                             hand_reference=self.q_ref)  # fmt: skip
@@ -112,16 +114,18 @@ class _Scheme:
         """Algorithm loop from ``r0``: ``(outcome, problem, point, trace)`` with outcome
         ``"stable"``, ``"unstable"``, ``"infeasible"`` (no hand equilibrium on the ray: the
         commands cannot be balanced) or ``"not_converged"``."""
+        d = self.data
+        bounds = scale_bounds(self.grasp, w, d.preload, d.hand, self.opts.bound_factor)
+        scale = bounds.scale  # N: the load this loop carries
         r_prev, w_prev = r0, w
         trace: list[dict[str, float]] = []
         for _ in range(self.max_iter):
-            prob, pt, s = self.step(w, r_prev, w_prev)
+            prob, pt, s = self.step(w, bounds, r_prev, w_prev)
             if pt is None:
                 return "infeasible", None, None, trace
             w_k = self.grasp.G @ pt.forces.reshape(-1) + w
             net = self.norm(w_k)
             trace.append({"net": net, "step": s})
-            scale = prob.bounds.scale  # N: the load this loop carries
             if self.norm(w_prev - w_k) < self.epsilon * scale:
                 stable = net < self.net_tol * scale
                 return ("stable" if stable else "unstable"), prob, pt, trace
@@ -167,7 +171,7 @@ def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options:
     L = it["length_scale"] or length_scale(grasp)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": opts.backend, "length_scale": L}
-    stats["force_bound"], stats["force_scale"] = bounds.force, bounds.scale
+    bounds_stats(bounds, stats)
     sch = _Scheme(grasp, data, opts, it["gamma"], it["epsilon"], it["net_tol"],
                   it["max_iter"], L, stats)  # fmt: skip
     zero = np.zeros(grasp.wrench_dim)

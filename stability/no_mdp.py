@@ -54,7 +54,7 @@ def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: An
 def _attempt(grasp, query, data, opts, bound_factor, stats) -> Solution:
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, bound_factor)
     prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
-    bounds_stats(prob, stats)
+    bounds_stats(bounds, stats)
     s = None
     if data.direction is None:
         prob.add_object_equilibrium(data.wrench)

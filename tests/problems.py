@@ -14,6 +14,7 @@ from stability.examples import (  # noqa: F401
     embed_wrench,
     pinch,
     random_fingers,
+    random_wrench,
     tendon_finger,
     three_embedded,
     three_planar,

@@ -233,8 +233,7 @@ def test_backends_agree_on_random_existence_queries():
     for _ in range(60):
         m = int(rng.integers(3, 7))
         g = P.random_fingers(rng, m)
-        q = Existence(wrench=rng.normal(size=6) * [1, 1, 1, 0.05, 0.05, 0.05],
-                      commands=rng.uniform(0, 0.1, m))  # fmt: skip
+        q = Existence(wrench=P.random_wrench(rng), commands=rng.uniform(0, 0.1, m))
         a = solve(g, q, method="no_mdp", backend="highs")
         b = solve(g, q, method="no_mdp", backend="scip")
         assert a.status == b.status == "solved"
@@ -253,8 +252,7 @@ def test_backends_agree_on_iterative_queries():
     for _ in range(8):
         m = int(rng.integers(3, 5))
         g = P.random_fingers(rng, m)
-        q = Existence(wrench=rng.normal(size=6) * [1, 1, 1, 0.05, 0.05, 0.05],
-                      commands=rng.uniform(0.02, 0.1, m))  # fmt: skip
+        q = Existence(wrench=P.random_wrench(rng), commands=rng.uniform(0.02, 0.1, m))
         a = solve(g, q, method="iterative", backend="highs")
         b = solve(g, q, method="iterative", backend="scip")
         assert a.status == b.status == "solved"

@@ -34,7 +34,7 @@ from ..errors import MethodError, ModelError
 from .model import INF, MipModel
 
 __all__ = ["BACKENDS", "DEFAULT_BACKEND", "INF", "MipModel", "MipResult", "available_backends",
-           "solve"]  # fmt: skip
+           "check_backend", "solve"]  # fmt: skip
 
 BACKENDS = ("highs", "scip")
 _PACKAGES = {"highs": "highspy", "scip": "pyscipopt"}  # the package each backend needs
@@ -74,6 +74,18 @@ def available_backends() -> list[str]:
     return [b for b in BACKENDS if importlib.util.find_spec(_PACKAGES[b]) is not None]
 
 
+def check_backend(backend: str) -> None:
+    """MethodError unless ``backend`` is known and its package installed (naming it)."""
+    if backend not in BACKENDS:
+        raise MethodError(f"unknown MIP backend {backend!r}; choose one of {BACKENDS}")
+    if backend not in available_backends():
+        pkg = _PACKAGES[backend]
+        raise MethodError(
+            f"MIP backend {backend!r} needs the {pkg!r} package, which is not installed "
+            f"(pip install {pkg}); available: {available_backends()}"
+        )
+
+
 def solve(
     model: MipModel,
     backend: str = DEFAULT_BACKEND,
@@ -104,14 +116,7 @@ def solve(
         ModelError: a model the backend cannot state (e.g. an indicator over an unbounded
             variable for HiGHS' big-M).
     """
-    if backend not in BACKENDS:
-        raise MethodError(f"unknown MIP backend {backend!r}; choose one of {BACKENDS}")
-    if backend not in available_backends():
-        pkg = _PACKAGES[backend]
-        raise MethodError(
-            f"MIP backend {backend!r} needs the {pkg!r} package, which is not installed "
-            f"(pip install {pkg}); available: {available_backends()}"
-        )
+    check_backend(backend)
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit >= 0):
         raise ModelError(f"time_limit must be a finite number of seconds >= 0, got {time_limit}")
     if not (0 <= gap < 1) or not (tol > 0):
@@ -137,7 +142,7 @@ def solve(
         raw["message"],
     )
     if polish and res.x is not None and any(k != "C" for k in model.kind):
-        _polish(model, res, gap)
+        _polish(model, res)
     if res.x is not None:
         res.violations = model.violations(res.x)
         worst = max(res.violations.values())
@@ -151,7 +156,7 @@ def solve(
     return res
 
 
-def _polish(model: MipModel, res: MipResult, gap: float) -> None:
+def _polish(model: MipModel, res: MipResult) -> None:
     """Replace ``res.x`` by the solution of the LP with the integers fixed, when it has one;
     see :func:`solve`."""
     from ._highs import solve_highs
