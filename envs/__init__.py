@@ -7,10 +7,14 @@ episode, e.g. ``gym.make("ihm/IslandsBridges-v0", reward="sparse")``:
   by the spur B4 (``SPUR_ISLANDS``/``SPUR_BRIDGES``, the default map of ``IslandsBridges()``;
   the first shipped map);
 - ``ihm/IslandsBridgesRing-v0``: the four-island ring (``RING_ISLANDS``/``RING_BRIDGES``).
+
+and the four-finger in-hand rotation task of thesis ch. 7 (:mod:`envs.four_finger`),
+64 steps per episode as in the thesis: ``gym.make("ihm/FourFingerRotate-v0", object="sphere")``.
 """
 
 import gymnasium
 
+from envs.four_finger import FourFingerError, FourFingerRotate
 from envs.geometry import Box, Disc
 from envs.islands_bridges import (
     DEFAULT_BRIDGES,
@@ -31,6 +35,8 @@ __all__ = [
     "SPUR_ISLANDS",
     "Box",
     "Disc",
+    "FourFingerError",
+    "FourFingerRotate",
     "IslandsBridges",
 ]
 
@@ -45,3 +51,10 @@ for _id, _kwargs in (
             max_episode_steps=200,
             kwargs=_kwargs,
         )
+
+if "ihm/FourFingerRotate-v0" not in gymnasium.registry:
+    gymnasium.register(
+        id="ihm/FourFingerRotate-v0",
+        entry_point="envs.four_finger:FourFingerRotate",
+        max_episode_steps=64,
+    )

@@ -67,18 +67,58 @@ def test_bodies_and_collision_geoms(hand):
     assert np.all(model.body_gravcomp[1:] == 1.0)
     assert model.body(f"{ff.FINGERS[0]}_base").parentid[0] != 0  # fixed to the palm, no free joint
     coll = [g for g in range(model.ngeom) if model.geom_conaffinity[g] or model.geom_contype[g]]
-    assert {model.body(model.geom_bodyid[g]).name for g in coll} == set(ff.BODY_NAMES)
-    assert np.all(model.geom_contype[coll] == 0) and np.all(model.geom_conaffinity[coll] == 1)
+    finger = [g for g in coll if model.body(model.geom_bodyid[g]).name in ff.BODY_NAMES]
+    fixed = [g for g in coll if g not in finger]
+    assert {model.body(model.geom_bodyid[g]).name for g in finger} == set(ff.BODY_NAMES)
+    assert {model.geom(g).name for g in fixed} == {"palm", "floor"}
+    # fingers collide with objects (contype 1) and each other; palm and floor with objects only
+    assert np.all(model.geom_contype[finger] == 2) and np.all(model.geom_conaffinity[finger] == 3)
+    assert np.all(model.geom_contype[fixed] == 0) and np.all(model.geom_conaffinity[fixed] == 1)
     types = {int(model.geom_type[g]) for g in range(model.ngeom)}
     assert types <= {
         int(t)
         for t in (
+            mujoco.mjtGeom.mjGEOM_PLANE,
             mujoco.mjtGeom.mjGEOM_CAPSULE,
             mujoco.mjtGeom.mjGEOM_SPHERE,
             mujoco.mjtGeom.mjGEOM_CYLINDER,
             mujoco.mjtGeom.mjGEOM_BOX,
         )
     }
+
+
+def test_fingers_collide_with_each_other(hand):
+    """Curled fingers swung sideways (abduction 0.4 rad commanded on f1 and f2) touch their
+    neighbours instead of passing through: MuJoCo reports contacts between different fingers
+    only, and they stop the abduction short of the setpoint (without finger-finger collision
+    the joints reach it: 0.4 rad)."""
+    model, _ = hand
+    data = mujoco.MjData(model)
+    q = np.tile([0.0, 1.2, 1.4], 4)  # curled in, tips near the palm centre
+    data.qpos[:] = q
+    data.ctrl[:] = q
+    data.ctrl[0], data.ctrl[3] = 0.4, -0.4  # f1 toward f2, f2 toward f1
+    for _ in range(1000):
+        mujoco.mj_step(model, data)
+    pairs = {
+        tuple(sorted(model.body(model.geom_bodyid[g]).name[:2] for g in (c.geom1, c.geom2)))
+        for c in data.contact[: data.ncon]
+    }
+    assert data.ncon > 0 and all(a != b for a, b in pairs)  # contacts between different fingers
+    assert abs(data.qpos[0]) < 0.3 and abs(data.qpos[3]) < 0.3  # blocked
+    assert min(c.dist for c in data.contact[: data.ncon]) > -ff.LINK_RADIUS  # soft skin only
+
+
+def test_dropped_object_lands_on_palm():
+    """Without the fingers' grip the sphere falls onto the palm disc and rests there."""
+    model, data = ihm.scenes.load_scene("four_finger_sphere", settle_grasp=False)
+    data.qpos[: ff.NQ] = np.tile([0.0, -0.5, 0.0], 4)  # fingers open wide
+    data.ctrl[:] = data.qpos[: ff.NQ]
+    for _ in range(2000):
+        mujoco.mj_step(model, data)
+    z = data.body("object").xpos[2]
+    assert z == pytest.approx(0.035, abs=1e-3)  # sphere radius above the palm top at z = 0
+    assert np.abs(data.qvel[ff.NV :]).max() < 1e-2
 
 
 def _tips(model, data, q):

@@ -51,7 +51,7 @@ def monitor_lines(run_dir: Path) -> list[str]:
 def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("runs")
     args = ["--shield", "none", "--total-steps", "256", "--eval-episodes", "6"]
-    p = run("train.ppo", *args, *TINY, "--seed", "3", "--out", str(out), "--no-progress")
+    p = run("train.ppo", "islands", *args, *TINY, "--seed", "3", "--out", str(out), "--no-progress")
     assert p.returncode == 0, p.stderr
     (d,) = out.iterdir()
     assert "success rate" in p.stdout
@@ -243,6 +243,6 @@ def test_islands_bad_options_exit_with_a_message(capsys: pytest.CaptureFixture[s
 
 
 def test_unknown_shield_subprocess_exits_2() -> None:
-    p = run("train.ppo", "--shield", "magic", "--total-steps", "64")
+    p = run("train.ppo", "islands", "--shield", "magic", "--total-steps", "64")
     assert p.returncode == 2
     assert "invalid choice: 'magic'" in p.stderr

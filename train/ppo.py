@@ -1,4 +1,9 @@
-"""PPO (stable-baselines3) on a shielded Gymnasium env: ``python -m train.ppo``.
+"""PPO (stable-baselines3): ``python -m train.ppo`` (the main job).
+
+With no arguments it trains the four-finger in-hand rotation policy of thesis
+ch. 7 (:mod:`train.rotate`, ``python -m train.ppo --help`` lists its options).
+``python -m train.ppo islands [options]`` runs this module's trainer on a
+shielded islands-and-bridges env, documented below.
 
 CleanRL shape, SB3 algorithm: one :class:`Config` dataclass (every field is a
 command-line option, ``--help`` lists them), one :func:`make_env` thunk with
@@ -26,8 +31,9 @@ monitor logs, with fresh streams for the new segment) and rewrites
 
 Examples::
 
-    python -m train.ppo --shield smart --reward sparse --total-steps 200000
-    python -m train.ppo --total-steps 50000 --resume runs/IslandsBridges-v0__smart__1__<time>
+    python -m train.ppo islands --shield smart --reward sparse --total-steps 200000
+    python -m train.ppo islands --total-steps 50000 \
+        --resume runs/IslandsBridges-v0__smart__1__<time>
 """
 
 from __future__ import annotations
@@ -631,5 +637,23 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     return {**result, "run_dir": str(run_dir)}
 
 
+def cli(argv: Sequence[str]) -> dict[str, Any]:
+    """``python -m train.ppo``: the four-finger rotation main job (:mod:`train.rotate`) by
+    default; ``python -m train.ppo islands [options]`` trains on the islands-and-bridges toy
+    (:func:`main`). ``--resume RUN_DIR`` picks the trainer from the run's config.json."""
+    argv = list(argv)
+    if argv and argv[0] == "islands":
+        return main(argv[1:])
+    if "--resume" in argv:
+        i = argv.index("--resume")
+        cfg_file = Path(argv[i + 1]) / "config.json" if i + 1 < len(argv) else None
+        if cfg_file is not None and cfg_file.is_file():
+            if "shield" in json.loads(cfg_file.read_text()):
+                return main(argv)
+    from train import rotate
+
+    return rotate.main(argv)
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    cli(sys.argv[1:])

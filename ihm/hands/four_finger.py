@@ -29,7 +29,8 @@ NQ = 12
 NV = 12
 NU = 12
 NTENDON = 0
-NGEOM = 21  # palm + per finger: knuckle, 2 visual and 2 collision link capsules
+# catch plane, palm (visual + collision), per finger: knuckle, 2 visual + 2 collision capsules
+NGEOM = 23
 
 # servo (series-elastic coupling) stiffness [N m / rad], every joint
 KP = 1.0
@@ -49,7 +50,8 @@ DEFAULT_FINGER_POSE = (0.0, 0.0, 0.7)
 DEFAULT_POSE = np.tile(DEFAULT_FINGER_POSE, len(FINGERS))  # (12,), order of JOINT_NAMES
 
 # dimensions [m]
-PALM_RADIUS = 0.085  # visual disc
+PALM_RADIUS = 0.085  # disc, top at z = 0, collides with objects
+FLOOR_Z = -0.08  # catch plane below the palm [m]
 FINGER_BASE_RADIUS = 0.07  # finger bases on this circle about the palm centre
 FINGER_AZIMUTHS = (0.0, np.pi / 2, np.pi, 3 * np.pi / 2)  # [rad] about +z
 LINK_RADIUS = 0.01  # capsule radius of both links (finger breadth 20 mm)

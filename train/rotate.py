@@ -1,0 +1,431 @@
+"""PPO on the four-finger in-hand rotation task: the main job, ``python -m train.ppo``.
+
+The thesis' setup (ch. 7, sec. "In-hand manipulation with pure reinforcement
+learning"): ``ihm/FourFingerRotate-v0`` with the 0.1 kg sphere and gravity on,
+reward = the sphere's angular velocity about the vertical axis, 64-step
+episodes from a cache of varied stable grasps, separate policy and value nets
+of 4 x 512, one update per 96 episodes of 64 steps (6,144 env steps).
+
+A run directory holds::
+
+    config.json           the RotateConfig of the run
+    model.zip             the latest PPO model (also every --checkpoint-every steps)
+    vecnormalize.pkl      the observation/reward normalisation statistics
+    monitor/N.monitor.csv one Monitor log per training env (return r, length l, time t)
+    eval.csv              periodic evaluations: steps, rad/s, drop rate, wall time
+    eval.json             the final evaluation
+    curve.png             training return and evaluated rotation speed over env steps
+
+Evaluation runs the deterministic policy for ``--eval-episodes`` episodes of
+``--eval-seconds`` (20 s = 400 policy steps) on validation streams and reports
+the mean rotation speed (turned angle about +z over the episode's duration,
+rad/s; a drop ends an episode and counts its time so far) and the drop rate.
+``--resume RUN_DIR`` continues a run for ``--total-steps`` more steps.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import sys
+import time
+import zipfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
+
+import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
+from envs.four_finger import OBJECTS, grasp_cache
+from train.ppo import TqdmProgress, build_parser, opt, seed_everything
+from train.seeding import EnvSeeds, RunSeeds
+
+__all__ = [
+    "EvalCallback",
+    "RotateConfig",
+    "build_model",
+    "evaluate_rotation",
+    "main",
+    "make_env",
+    "parse_config",
+    "plot_curve",
+]
+
+ENV_ID = "ihm/FourFingerRotate-v0"
+
+
+@dataclass
+class RotateConfig:
+    """Everything a rotation training run depends on; saved as config.json."""
+
+    object: str = opt("sphere", "object in the hand", choices=OBJECTS)
+    gravity: bool = opt(True, "gravity on (the thesis' hard case)")
+    total_steps: int = opt(
+        400_000, "env steps to train (with --resume: steps to add); 3000000 for the long run"
+    )
+    seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
+    n_envs: int = opt(16, "parallel training envs")
+    subproc: bool = opt(
+        False, "step the envs in subprocesses (SubprocVecEnv; one per env, pays off with cores)"
+    )
+    pi: list[int] = opt([512, 512, 512, 512], "hidden layers of the policy net (thesis: 4 x 512)")
+    vf: list[int] = opt([512, 512, 512, 512], "hidden layers of the separate value net")
+    learning_rate: float = opt(1e-4, "Adam learning rate")
+    n_steps: int = opt(384, "rollout length per env (16 x 384 = 96 episodes of 64 steps)")
+    batch_size: int = opt(1024, "minibatch size")
+    n_epochs: int = opt(5, "PPO epochs per rollout")
+    gamma: float = opt(0.99, "discount factor")
+    gae_lambda: float = opt(0.95, "GAE lambda")
+    clip_range: float = opt(0.2, "PPO clipping range")
+    ent_coef: float = opt(0.0, "entropy bonus coefficient")
+    log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
+    drop_weight: float = opt(0.0, "env drop penalty weight (0: the thesis' reward)")
+    episode_steps: int = opt(64, "training episode length (thesis: 64)")
+    checkpoint_every: int = opt(100_000, "env steps between checkpoints and evaluations")
+    eval_episodes: int = opt(20, "episodes per evaluation (deterministic policy)")
+    eval_seconds: float = opt(20.0, "length of an evaluation episode [s]")
+    threads: int = opt(2, "torch threads for the PPO update")
+    out: str = opt("runs", "directory that receives the run directory")
+    resume: str | None = opt(None, "run directory to continue")
+    progress: bool = opt(True, "show a tqdm progress bar")
+    verbose: int = opt(0, "SB3 verbosity")
+
+
+_FIELDS = set(RotateConfig.__dataclass_fields__)
+
+
+def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
+    """Parse the command line into a :class:`RotateConfig` (exit 2 on bad options)."""
+    parser = build_parser(RotateConfig, description=(__doc__ or "").split("\n\n")[0])
+    cfg = RotateConfig(**vars(parser.parse_args(argv)))
+    ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
+    problems = [f"--{k.replace('_', '-')} must be >= 1" for k in ints if getattr(cfg, k) < 1]
+    problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
+    if cfg.seed < 0:
+        problems.append("--seed must be >= 0")
+    if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1:
+        problems.append("--eval-episodes must be >= 0, --checkpoint-every and --threads >= 1")
+    if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
+        problems.append("--eval-seconds must be > 0")
+    if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
+        problems.append(f"--resume {cfg.resume}: no model.zip there")
+    if problems:
+        parser.error("; ".join(problems))
+    return cfg
+
+
+def make_env(
+    cfg: RotateConfig,
+    seeds: EnvSeeds | None = None,
+    monitor_file: str | None = None,
+    append: bool = False,
+    max_steps: int | None = None,
+) -> Callable[[], gym.Env]:
+    """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
+    ``cfg.episode_steps``) -> Monitor when ``monitor_file`` is given; seeded with ``seeds``."""
+
+    def thunk() -> gym.Env:
+        env = gym.make(
+            ENV_ID,
+            object=cfg.object,
+            gravity=cfg.gravity,
+            drop_weight=cfg.drop_weight,
+            max_episode_steps=max_steps or cfg.episode_steps,
+        )
+        if monitor_file is not None:
+            env = Monitor(
+                env, filename=monitor_file, info_keywords=("dropped",), override_existing=not append
+            )
+        if seeds is not None:
+            env.reset(seed=seeds.reset)
+            env.action_space.seed(seeds.action_space)
+        return env
+
+    return thunk
+
+
+def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
+    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``)."""
+    return PPO(
+        "MlpPolicy",
+        vec_env,
+        learning_rate=cfg.learning_rate,
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        policy_kwargs={
+            "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
+            "log_std_init": cfg.log_std_init,
+        },
+        seed=None,
+        device="cpu",
+        verbose=cfg.verbose,
+    )
+
+
+def evaluate_rotation(
+    model: PPO,
+    eval_envs: Sequence[gym.Env],
+    n_episodes: int,
+    normalize: Callable[[np.ndarray], np.ndarray] | None = None,
+    deterministic: bool = True,
+) -> dict[str, float]:
+    """Mean rotation speed [rad/s] and drop rate of the policy over ``n_episodes`` episodes.
+
+    Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes, all queried in one batch.
+    Speed of an episode = ``info["rotation_angle"] / (steps * dt)``; a drop ends it.
+    """
+    k = len(eval_envs)
+    targets = [(n_episodes + i) // k for i in range(k)] if k else []
+    counts = [0] * k
+    speeds: list[float] = []
+    drops: list[bool] = []
+    obs: list[Any] = [None] * k
+    steps = [0] * k
+    for i in range(k):
+        if targets[i] > 0:
+            obs[i], _ = eval_envs[i].reset()
+    while True:
+        active = [i for i in range(k) if counts[i] < targets[i]]
+        if not active:
+            break
+        batch = np.stack([obs[i] for i in active])
+        if normalize is not None:
+            batch = normalize(batch)
+        actions, _ = model.predict(batch, deterministic=deterministic)
+        for j, i in enumerate(active):
+            obs[i], _, term, trunc, info = eval_envs[i].step(actions[j])
+            steps[i] += 1
+            if term or trunc:
+                dt = eval_envs[i].unwrapped.dt
+                speeds.append(float(info["rotation_angle"]) / (steps[i] * dt))
+                drops.append(bool(info["dropped"]))
+                counts[i] += 1
+                steps[i] = 0
+                if counts[i] < targets[i]:
+                    obs[i], _ = eval_envs[i].reset()
+    return {
+        "episodes": len(speeds),
+        "speed_rad_s": float(np.mean(speeds)) if speeds else float("nan"),
+        "speed_median_rad_s": float(np.median(speeds)) if speeds else float("nan"),
+        "drop_rate": float(np.mean(drops)) if drops else float("nan"),
+    }
+
+
+class EvalCallback(BaseCallback):
+    """Every ``every`` env steps: save model.zip and vecnormalize.pkl, evaluate, append a row
+    to eval.csv, redraw curve.png."""
+
+    def __init__(
+        self, cfg: RotateConfig, run_dir: Path, eval_envs: Sequence[gym.Env], every: int
+    ) -> None:
+        super().__init__()
+        self.cfg, self.run_dir, self.eval_envs, self.every = cfg, run_dir, eval_envs, every
+        self.t0 = time.perf_counter()
+        self.next = 0
+
+    def _on_training_start(self) -> None:
+        self.next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.num_timesteps >= self.next:
+            self.next = (self.num_timesteps // self.every + 1) * self.every
+            checkpoint(self.model, self.run_dir)
+            if self.cfg.eval_episodes:
+                self.evaluate()
+
+    def evaluate(self) -> dict[str, float]:
+        env = self.model.get_env()
+        norm = env.normalize_obs if isinstance(env, VecNormalize) else None
+        res = evaluate_rotation(self.model, self.eval_envs, self.cfg.eval_episodes, norm)
+        row = {
+            "steps": int(self.num_timesteps),
+            "speed_rad_s": round(res["speed_rad_s"], 4),
+            "drop_rate": round(res["drop_rate"], 4),
+            "episodes": res["episodes"],
+            "wall_s": round(time.perf_counter() - self.t0, 1),
+        }
+        path = self.run_dir / "eval.csv"
+        new = not path.is_file()
+        with path.open("a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(row))
+            if new:
+                w.writeheader()
+            w.writerow(row)
+        self.logger.record("eval/speed_rad_s", res["speed_rad_s"])
+        self.logger.record("eval/drop_rate", res["drop_rate"])
+        plot_curve(self.run_dir)
+        return res
+
+
+def checkpoint(model: PPO, run_dir: Path) -> None:
+    """Save model.zip and vecnormalize.pkl (written to a temporary name, then renamed)."""
+    tmp = run_dir / "model.tmp.zip"
+    model.save(tmp)
+    tmp.replace(run_dir / "model.zip")
+    env = model.get_env()
+    if isinstance(env, VecNormalize):
+        env.save(str(run_dir / "vecnormalize.tmp.pkl"))
+        (run_dir / "vecnormalize.tmp.pkl").replace(run_dir / "vecnormalize.pkl")
+
+
+def _monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(cumulative env steps at each episode end, episode return) over all monitor files, in
+    wall-time order."""
+    rows = []
+    for p in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        with p.open() as f:
+            lines = [ln for ln in f if not ln.startswith("#")]
+        for r in csv.DictReader(lines):
+            rows.append((float(r["t"]), float(r["r"]), int(r["l"])))
+    if not rows:
+        return np.zeros(0), np.zeros(0)
+    rows.sort()
+    t, r, length = (np.array(c) for c in zip(*rows, strict=True))
+    return np.cumsum(length), r
+
+
+def plot_curve(run_dir: Path, out: Path | None = None) -> Path:
+    """curve.png: training episode return (64-step episodes, smoothed) and the evaluated
+    rotation speed and drop rate over env steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps, ret = _monitor_returns(run_dir)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    if len(ret):
+        w = max(1, min(200, len(ret) // 20))
+        smooth = np.convolve(ret, np.ones(w) / w, mode="valid")
+        ax[0].plot(steps, ret, ".", ms=1, alpha=0.15, color="C0")
+        ax[0].plot(steps[w - 1 :], smooth, color="C0", label=f"mean of {w} episodes")
+        ax[0].legend(loc="lower right")
+    ax[0].set_xlabel("env steps")
+    ax[0].set_ylabel("training episode return [rad/s summed over 64 steps]")
+    ax[0].set_title("training return")
+    ev = run_dir / "eval.csv"
+    if ev.is_file():
+        with ev.open() as f:
+            rows = list(csv.DictReader(f))
+        if rows:
+            x = [int(r["steps"]) for r in rows]
+            ax[1].plot(x, [float(r["speed_rad_s"]) for r in rows], "o-", label="speed [rad/s]")
+            ax[1].plot(x, [float(r["drop_rate"]) for r in rows], "s--", label="drop rate")
+            ax[1].axhline(0.5, color="gray", lw=0.8, ls=":")
+            ax[1].legend(loc="upper left")
+    ax[1].set_xlabel("env steps")
+    ax[1].set_title("evaluation: deterministic policy, 20 s episodes")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    out = out or run_dir / "curve.png"
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    """Train (or resume), evaluate, save; returns the final evaluation."""
+    cfg = parse_config(argv)
+    torch.set_num_threads(cfg.threads)
+    if cfg.resume is not None:
+        run_dir = Path(cfg.resume)
+        saved = json.loads((run_dir / "config.json").read_text())
+        cfg = dataclasses.replace(
+            RotateConfig(**{k: v for k, v in saved.items() if k in _FIELDS}),
+            total_steps=cfg.total_steps,
+            progress=cfg.progress,
+            verbose=cfg.verbose,
+            resume=cfg.resume,
+            threads=cfg.threads,
+        )
+    else:
+        name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+        run_dir = Path(cfg.out) / name
+        while run_dir.exists():
+            run_dir = run_dir.with_name(run_dir.name + "_")
+        run_dir.mkdir(parents=True)
+        config = {**dataclasses.asdict(cfg), "resume": None}
+        (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+
+    grasp_cache(cfg.object, cfg.gravity)  # build the start-state cache once, before any worker
+    done = 0
+    if cfg.resume is not None:
+        with zipfile.ZipFile(run_dir / "model.zip") as z:
+            done = int(json.loads(z.read("data"))["num_timesteps"])
+    seeds = RunSeeds(cfg.seed, segment=done)
+    seed_everything(seeds.global_seed)
+    mon = run_dir / "monitor"
+    mon.mkdir(exist_ok=True)
+    thunks = [
+        make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
+        for i, s in enumerate(seeds.envs("train", cfg.n_envs))
+    ]
+    vec: VecEnv = SubprocVecEnv(thunks) if cfg.subproc and len(thunks) > 1 else DummyVecEnv(thunks)
+    stats = run_dir / "vecnormalize.pkl"
+    if cfg.resume is not None and stats.is_file():
+        vec = VecNormalize.load(str(stats), vec)
+    else:
+        vec = VecNormalize(vec, gamma=cfg.gamma)
+    max_eval = int(round(cfg.eval_seconds * 20))
+    n_eval = max(1, min(cfg.eval_episodes, 10))
+    eval_envs = [make_env(cfg, s, max_steps=max_eval)() for s in seeds.envs("validation", n_eval)]
+    if cfg.resume is not None:
+        model = PPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
+    else:
+        model = build_model(cfg, vec)
+    model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
+    ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every)
+    callbacks: list[BaseCallback] = [ev]
+    if cfg.progress:
+        rollout = cfg.n_steps * cfg.n_envs
+        total = -(-cfg.total_steps // rollout) * rollout
+        callbacks.append(TqdmProgress(total, desc=run_dir.name))
+    t0 = time.perf_counter()
+    model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
+    train_s = time.perf_counter() - t0
+    checkpoint(model, run_dir)
+    vec.training = False
+    result = ev.evaluate() if cfg.eval_episodes else {}
+    result = {
+        **result,
+        "num_timesteps": int(model.num_timesteps),
+        "train_seconds": round(train_s, 1),
+        "steps_per_second": round((model.num_timesteps - done) / train_s, 1),
+        "eval_episode_seconds": cfg.eval_seconds,
+    }
+    (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    plot_curve(run_dir)
+    vec.close()
+    for env in eval_envs:
+        env.close()
+    print(
+        f"{run_dir}: {result['num_timesteps']} steps in {train_s:.0f} s "
+        f"({result['steps_per_second']:.0f} env steps/s); deterministic policy over "
+        f"{result.get('episodes', 0)} x {cfg.eval_seconds:g} s: "
+        f"{result.get('speed_rad_s', float('nan')):.3f} rad/s, "
+        f"drop rate {result.get('drop_rate', float('nan')):.3f}"
+    )
+    return {**result, "run_dir": str(run_dir)}
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
