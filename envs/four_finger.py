@@ -17,9 +17,12 @@ shape raises :class:`FourFingerError`.
 
 ## Observation Space
 
-``Box(-inf, inf, (56,), float32)``, the thesis' observation: joint positions,
+``Box(low, high, (56,), float32)``, the thesis' observation: joint positions,
 actuator setpoints, contact positions and contact normal forces. All positions
 are in the palm frame (= MuJoCo world frame: palm top at ``z = 0``, +z up).
+Bounds: joints ``[-pi, pi]``, setpoints the ``ctrlrange``, contact positions
+``[-0.25, 0.25]`` m (the fingers reach 0.17 m), normal forces ``[0, MAX_FORCE]``
+(50 N; values are clipped to the box, which only an impact spike can reach).
 
 | index | what | MJCF names | unit |
 |-------|------|------------|------|
@@ -110,6 +113,7 @@ OBJECTS = ("sphere", "cylinder", "cube")
 CONTACT_LINKS = ff.BODY_NAMES  # f1_proximal, f1_distal, ..., f4_distal: observed links
 DROP_Z = 0.05  # [m] object centre below this: dropped
 OUT_RADIUS = 0.045  # [m] object centre farther than this from the palm axis: out of the hand
+MAX_FORCE = 50.0  # [N] observed normal forces are clipped here (impact spikes only)
 VERIFY_STEPS = 40  # policy steps a cached grasp must hold with zero actions
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 _GENERATOR_VERSION = 1  # bump when generate_grasps changes
@@ -459,7 +463,14 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             frame_skip=self.frame_skip,
         )
         self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (N_OBS,), dtype=np.float32)
+        lo = np.concatenate(
+            [np.full(ff.NQ, -np.pi), self._ph.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
+        )
+        hi = np.concatenate(
+            [np.full(ff.NQ, np.pi), self._ph.ctrl_hi, np.tile([0.25, 0.25, 0.25, MAX_FORCE], 8)]
+        )
+        self.observation_space = spaces.Box(lo.astype(np.float32), hi.astype(np.float32))
+        self._lo, self._hi = self.observation_space.low, self.observation_space.high
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._quat = np.zeros(4)
         self._angle = 0.0
@@ -474,7 +485,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         c = o[2 * ff.NU :].reshape(len(CONTACT_LINKS), 4)
         c[:, :3] = pos
         c[:, 3] = fn
-        return o.copy()
+        return np.clip(o, self._lo, self._hi)
 
     def _yaw_rate(self, quat_before: NDArray[np.float64]) -> float:
         """Mean angular velocity about world +z since ``quat_before`` [rad/s]."""

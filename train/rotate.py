@@ -55,6 +55,7 @@ __all__ = [
     "RotateConfig",
     "build_model",
     "evaluate_rotation",
+    "export_policy",
     "main",
     "make_env",
     "parse_config",
@@ -284,6 +285,20 @@ def checkpoint(model: PPO, run_dir: Path) -> None:
     if isinstance(env, VecNormalize):
         env.save(str(run_dir / "vecnormalize.tmp.pkl"))
         (run_dir / "vecnormalize.tmp.pkl").replace(run_dir / "vecnormalize.pkl")
+
+
+def export_policy(run_dir: Path, dest: Path) -> Path:
+    """Copy a run's policy (weights only, ``ActorCriticPolicy.save``: no optimiser state),
+    ``vecnormalize.pkl``, ``config.json`` and ``eval.json``/``eval.csv`` to ``dest``: what
+    ``python -m train.gait`` and replaying need, a quarter of ``model.zip``'s size."""
+    import shutil
+
+    dest.mkdir(parents=True, exist_ok=True)
+    PPO.load(run_dir / "model.zip", device="cpu").policy.save(str(dest / "policy.pt"))
+    for f in ("vecnormalize.pkl", "config.json", "eval.json", "eval.csv", "curve.png"):
+        if (run_dir / f).is_file():
+            shutil.copy(run_dir / f, dest / f)
+    return dest
 
 
 def _monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:

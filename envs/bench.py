@@ -1,0 +1,232 @@
+"""Throughput of the four-finger rotation env and of PPO training on it: ``python -m envs.bench``.
+
+Env steps per second for one process (physics + observation + reward, random
+actions in [-1, 1]^12 from the cached start grasps: the training distribution),
+from the landed model's settings to the shipped env, one change at a time:
+
+1. ``landed``: the hand model as first landed: 1 ms x 50 substeps, Newton, noslip
+   pass (20 iterations), impratio 1, palm and floor without collision, no
+   finger-finger contacts, observation through ``ihm.grasp_from_mujoco``;
+2. ``+ honest friction``: noslip off, impratio 100 (the grasp holds without noslip);
+3. ``+ collisions``: palm, catch plane and finger-finger contacts on (what the task needs);
+4. ``+ 2 ms x 25``: the timestep doubled (solref 0.01 s is still 5 timesteps);
+5. ``+ PGS``: the same contact problem solved by PGS instead of Newton;
+6. ``+ fast observation``: the env's own contact path (= the shipped env).
+
+Each row is the median over ``--repeats`` runs of ``--steps`` env steps, with its
+ratio to row 1 measured in the same run. The fidelity columns compare, on a
+scripted turn (abduction setpoints +0.05 rad for 6 steps, then 6 steps of zero
+action) from 8 cached grasps, the object's yaw and position at the end with
+those of row 2's physics (median over the grasps).
+
+``--train`` adds PPO training throughput (env steps/s including the updates) with
+``python -m train.ppo``'s default settings (4 x 512 nets, 16 envs, 6,144-step
+rollouts), beside the thesis' 474 env steps/s (15.36M steps in about 9 h).
+
+Writes ``--out``/four_finger_env.csv and four_finger_env.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from envs.four_finger import FourFingerRotate
+from ihm.contacts import grasp_from_mujoco
+from ihm.hands import four_finger as ff
+from stability import GraspError
+
+THESIS_STEPS_PER_S = 15_360_000 / (9 * 3600)  # 474: thesis sec. 7.1.2, 15.36M steps in ~9 h
+
+
+def _slow_observe(env: FourFingerRotate) -> Callable[[], np.ndarray]:
+    """The observation through ihm.grasp_from_mujoco (what was available before the env)."""
+    m, d = env.model, env.data
+
+    def observe() -> np.ndarray:
+        o = np.zeros(56, dtype=np.float32)
+        o[:12] = d.qpos[:12]
+        o[12:24] = d.ctrl
+        try:
+            g = grasp_from_mujoco(m, d)
+        except GraspError:
+            return o
+        pts = g.points_world()
+        feats = o[24:].reshape(8, 4)
+        for k, geom in enumerate(g.hand_geoms):
+            name = m.body(m.geom_bodyid[geom]).name
+            if name in ff.BODY_NAMES:
+                i = ff.BODY_NAMES.index(name)
+                feats[i, :3] = pts[k]
+                feats[i, 3] += g.forces[k, 0]
+        return o
+
+    return observe
+
+
+def configure(env: FourFingerRotate, level: int) -> None:
+    """Apply the settings of row ``level`` (1..6) to a fresh env (which is row 6)."""
+    m = env.model
+    if level <= 4:
+        m.opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    if level <= 3:
+        m.opt.timestep = 0.001
+        env.frame_skip = 50
+    if level <= 2:
+        for g in range(m.ngeom):
+            if m.geom_contype[g] == 2:  # finger capsules: objects only, as landed
+                m.geom_contype[g], m.geom_conaffinity[g] = 0, 1
+            elif m.geom(g).name in ("palm", "floor"):
+                m.geom_contype[g] = m.geom_conaffinity[g] = 0
+    if level <= 1:
+        m.opt.noslip_iterations = 20
+        m.opt.impratio = 1.0
+    if level <= 5:
+        env._observe = _slow_observe(env)  # type: ignore[method-assign]
+
+
+ROWS = (
+    "landed",
+    "+ honest friction",
+    "+ collisions",
+    "+ 2 ms x 25",
+    "+ PGS",
+    "+ fast observation",
+)
+
+
+def steps_per_second(level: int, steps: int, repeats: int, seed: int = 0) -> list[float]:
+    """Env steps/s of row ``level`` (random actions, resets from the grasp cache)."""
+    env = FourFingerRotate()
+    configure(env, level)
+    rng = np.random.default_rng(seed)
+    out = []
+    for r in range(repeats):
+        env.reset(seed=seed + r)
+        acts = rng.uniform(-1, 1, (steps, 12)).astype(np.float32)
+        t = time.perf_counter()
+        for a in acts:
+            if env.step(a)[2]:
+                env.reset()
+        out.append(steps / (time.perf_counter() - t))
+    return out
+
+
+def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
+    """Per start grasp: (yaw [rad], x, y, z [m]) of the object after the scripted turn."""
+    env = FourFingerRotate()
+    configure(env, level)
+    act = np.zeros(12, dtype=np.float32)
+    act[0::3] = 1.0
+    res = []
+    for i in grasps:
+        env.reset(options={"grasp": i})
+        for k in range(12):
+            info = env.step(act if k < 6 else 0 * act)[4]
+        res.append([info["rotation_angle"], *env.data.qpos[ff.NQ : ff.NQ + 3]])
+    return np.array(res)
+
+
+def train_steps_per_second(total: int = 12_288) -> float:
+    """PPO training throughput with train.ppo's defaults, env steps/s including updates."""
+    import torch
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from train import rotate
+    from train.seeding import RunSeeds
+
+    cfg = rotate.RotateConfig()
+    torch.set_num_threads(cfg.threads)
+    vec = VecNormalize(
+        DummyVecEnv([rotate.make_env(cfg, s) for s in RunSeeds(0).envs("train", cfg.n_envs)])
+    )
+    model = rotate.build_model(cfg, vec)
+    t = time.perf_counter()
+    model.learn(total)
+    rate = model.num_timesteps / (time.perf_counter() - t)
+    vec.close()
+    return rate
+
+
+def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
+    p = argparse.ArgumentParser(prog="python -m envs.bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("--steps", type=int, default=600, help="env steps per repeat")
+    p.add_argument("--repeats", type=int, default=5, help="repeats per row (median reported)")
+    p.add_argument("--train", action=argparse.BooleanOptionalAction, default=True,
+                   help="also measure PPO training throughput")  # fmt: skip
+    p.add_argument("--out", default="bench_out", help="directory for the CSV and PNG")
+    a = p.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    ref = scripted_turn(2)
+    rows: list[dict[str, object]] = []
+    base = None
+    for level, name in enumerate(ROWS, start=1):
+        sps = steps_per_second(level, a.steps, a.repeats)
+        med = float(np.median(sps))
+        base = base or med
+        turn = scripted_turn(level)
+        rows.append(
+            {
+                "config": name,
+                "env_steps_per_s": round(med, 1),
+                "min": round(min(sps), 1),
+                "max": round(max(sps), 1),
+                "ratio_to_landed": round(med / base, 2),
+                "yaw_diff_rad": round(float(np.median(np.abs(turn[:, 0] - ref[:, 0]))), 4),
+                "pos_diff_mm": round(
+                    float(np.median(np.linalg.norm(turn[:, 1:] - ref[:, 1:], axis=1))) * 1e3, 3
+                ),
+                "turn_yaw_rad": round(float(np.median(turn[:, 0])), 4),
+            }
+        )
+        r = rows[-1]
+        print(
+            f"{name:20s} {med:7.0f} env steps/s (x{r['ratio_to_landed']}), scripted turn: "
+            f"yaw {r['turn_yaw_rad']:+.3f} rad, vs row 2: {r['yaw_diff_rad']:.4f} rad, "
+            f"{r['pos_diff_mm']:.3f} mm"
+        )
+    if a.train:
+        rate = train_steps_per_second()
+        rows.append({"config": "PPO training (4x512, 16 envs)", "env_steps_per_s": round(rate, 1)})
+        print(f"PPO training: {rate:.0f} env steps/s including updates")
+    rows.append({"config": "thesis training (server)", "env_steps_per_s": round(THESIS_STEPS_PER_S)})
+    fields = list(rows[0])
+    with (out / "four_finger_env.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    _plot(rows, out / "four_finger_env.png")
+    print(f"wrote {out / 'four_finger_env.csv'} and {out / 'four_finger_env.png'}")
+    return rows
+
+
+def _plot(rows: list[dict[str, object]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [str(r["config"]) for r in rows]
+    vals = [float(r["env_steps_per_s"]) for r in rows]  # type: ignore[arg-type]
+    colors = ["C0"] * len(ROWS) + ["C1"] * (len(rows) - len(ROWS))
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.barh(names[::-1], vals[::-1], color=colors[::-1])
+    for y, v in enumerate(vals[::-1]):
+        ax.text(v, y, f" {v:.0f}", va="center")
+    ax.axvline(1500, color="gray", ls=":", lw=1)
+    ax.set_xlabel("env steps per second (one process; training: incl. PPO updates)")
+    ax.set_title("Four-finger rotation env on this 2-core machine")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,305 @@
+"""``ihm/FourFingerRotate-v0`` (envs.four_finger): API checks, the observation against
+ihm.grasp_from_mujoco / mj_contactForce, the reward's sign and terms, stable resets, bad
+input, and a subprocess smoke run of the main job ``python -m train.ppo``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import envs  # noqa: F401  (registers the ids)
+from envs.four_finger import (
+    CONTACT_LINKS,
+    DROP_Z,
+    N_OBS,
+    VERIFY_STEPS,
+    FourFingerError,
+    FourFingerRotate,
+    generate_grasps,
+    grasp_cache,
+)
+from ihm.contacts import grasp_from_mujoco
+from ihm.hands import four_finger as ff
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = FourFingerRotate()
+    yield e
+    e.close()
+
+
+def test_registered_with_the_thesis_episode_length() -> None:
+    e = gym.make("ihm/FourFingerRotate-v0")
+    assert e.spec.max_episode_steps == 64
+    assert isinstance(e.unwrapped, FourFingerRotate)
+    assert e.unwrapped.dt == pytest.approx(0.05)  # 20 Hz policy
+    assert e.observation_space.shape == (N_OBS,) == (56,)
+    assert e.action_space.shape == (12,)
+    e.close()
+
+
+def test_gymnasium_and_sb3_check_env_without_warnings(env) -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym_check_env(env, skip_render_check=True)
+        sb3_check_env(env, warn=True)
+    assert [str(w.message) for w in caught] == []
+
+
+def test_same_seed_same_rollout() -> None:
+    a, b = FourFingerRotate(), FourFingerRotate()
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (30, 12)).astype(np.float32)
+    out = []
+    for e in (a, b):
+        obs, info = e.reset(seed=123)
+        traj = [obs]
+        for act in actions:
+            obs, r, term, trunc, info = e.step(act)
+            traj.append(np.append(obs, r))
+            if term:
+                break
+        out.append(np.concatenate(traj))
+    assert np.array_equal(out[0], out[1])
+    picked = {a.reset(seed=s)[1]["grasp"] for s in range(20)}
+    assert len(picked) > 10  # seeds draw different start grasps
+
+
+def _link_of(model, geom) -> int:
+    return CONTACT_LINKS.index(model.body(model.geom_bodyid[geom]).name)
+
+
+@pytest.mark.parametrize("steps", [0, 5, 15])
+def test_observation_matches_grasp_from_mujoco(env, steps) -> None:
+    """Per finger link: the mean contact position and summed normal force equal those of
+    ihm.grasp_from_mujoco's contacts on that link, and mj_contactForce's normal component."""
+    obs, _ = env.reset(seed=7)
+    rng = np.random.default_rng(steps)
+    for _ in range(steps):
+        obs, *_ = env.step(rng.uniform(-0.3, 0.3, 12).astype(np.float32))
+    m, d = env.model, env.data
+    g = grasp_from_mujoco(m, d)
+    pos = np.zeros((8, 3))
+    fn = np.zeros(8)
+    n = np.zeros(8)
+    for k, geom in enumerate(g.hand_geoms):
+        i = _link_of(m, geom)
+        pos[i] += g.points_world()[k]
+        fn[i] += g.forces[k, 0]
+        n[i] += 1
+    pos[n > 0] /= n[n > 0, None]
+    # mj_contactForce directly: the first component is the normal force
+    fn_direct = np.zeros(8)
+    f6 = np.zeros(6)
+    for c in range(d.ncon):
+        con = d.contact[c]
+        b1, b2 = m.geom_bodyid[con.geom1], m.geom_bodyid[con.geom2]
+        obj = m.body("object").id
+        if obj not in (b1, b2) or con.efc_address < 0:
+            continue
+        other = con.geom2 if b1 == obj else con.geom1
+        if m.body(m.geom_bodyid[other]).name not in CONTACT_LINKS:
+            continue
+        mujoco.mj_contactForce(m, d, c, f6)
+        fn_direct[_link_of(m, other)] += f6[0]
+    feats = obs[24:].reshape(8, 4)
+    assert n.sum() >= 2  # a grasp, not an empty hand
+    np.testing.assert_allclose(feats[:, :3], pos, atol=1e-6)  # float32 observation
+    np.testing.assert_allclose(feats[:, 3], fn, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(feats[:, 3], fn_direct, rtol=1e-5, atol=1e-6)
+    assert np.all(feats[n == 0] == 0.0)
+    assert np.all(feats[n > 0, 3] >= 0.0)
+    np.testing.assert_allclose(obs[:12], d.qpos[:12], atol=1e-6)
+    np.testing.assert_allclose(obs[12:24], d.ctrl, atol=1e-6)
+
+
+def test_no_contact_gives_zeros(env) -> None:
+    env.reset(seed=1)
+    m, d = env.model, env.data
+    d.qpos[ff.NQ : ff.NQ + 3] = [0.0, 0.0, 0.5]  # object lifted clear of the hand
+    mujoco.mj_forward(m, d)
+    obs = env._observe()
+    assert d.ncon == 0 or all(
+        m.body("object").id not in (m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2])
+        for c in d.contact[: d.ncon]
+    )
+    assert np.all(obs[24:] == 0.0)
+
+
+def test_reward_sign_and_terms() -> None:
+    """All four abduction setpoints stepped positive (a[j0] = +1) swing the fingertips
+    counter-clockwise about +z and turn the held sphere with them: positive reward; the
+    scripted reverse turns it back: negative. The reward equals the sum of the info terms."""
+    e = FourFingerRotate(drop_weight=2.0, action_weight=0.1)
+    obs, info = e.reset(seed=0, options={"grasp": 0})
+    quat0 = e.data.qpos[ff.NQ + 3 : ff.NQ + 7].copy()
+    act = np.zeros(12, dtype=np.float32)
+    act[0::3] = 1.0
+    fwd = []
+    for _ in range(4):
+        obs, r, term, trunc, info = e.step(act)
+        assert not term
+        assert r == pytest.approx(info["rotation"] + info["drop"] + info["action"], abs=1e-12)
+        assert info["action"] == pytest.approx(-0.1 * 4 / 12)
+        fwd.append(info["rotation"])
+    assert sum(fwd) > 0.0 and min(fwd) > -0.05
+    # the accumulated angle is the object's yaw change about world z (up to the small tilts
+    # that make per-step z components differ from the yaw of the total rotation)
+    quat = e.data.qpos[ff.NQ + 3 : ff.NQ + 7]
+    rel = np.zeros(4)
+    mujoco.mju_mulQuat(rel, quat, np.array([quat0[0], *(-quat0[1:])]))
+    yaw = 2 * np.arctan2(rel[3], rel[0])
+    assert yaw > 0.1 and info["rotation_angle"] == pytest.approx(yaw, rel=0.1)
+    assert info["rotation_angle"] == pytest.approx(sum(fwd) * e.dt, rel=1e-9)
+    back = [e.step(-act)[4]["rotation"] for _ in range(4)]
+    assert sum(back) < 0.0
+
+
+def test_drop_terminates_with_the_penalty() -> None:
+    e = FourFingerRotate(drop_weight=3.0)
+    e.reset(seed=0)
+    e.data.qpos[ff.NQ + 2] = DROP_Z - 0.01  # object below the drop height
+    mujoco.mj_forward(e.model, e.data)
+    act = np.zeros(12, dtype=np.float32)
+    act[1::3] = -1.0  # open
+    _, r, term, trunc, info = e.step(act)
+    assert term and not trunc and info["dropped"]
+    assert info["drop"] == -3.0
+    assert r == pytest.approx(info["rotation"] - 3.0)
+
+
+def test_resets_hold_with_zero_actions() -> None:
+    """With gravity on, the object stays in the hand for 40 steps from >= 95% of resets."""
+    e = FourFingerRotate()
+    held = 0
+    n = 60
+    zero = np.zeros(12, dtype=np.float32)
+    for i in range(n):
+        e.reset(seed=1000 + i)
+        p0 = e.data.qpos[ff.NQ : ff.NQ + 3].copy()
+        ok = True
+        for _ in range(40):
+            _, _, term, _, _ = e.step(zero)
+            if term:
+                ok = False
+                break
+        held += ok and np.linalg.norm(e.data.qpos[ff.NQ : ff.NQ + 3] - p0) < 5e-3
+    assert held / n >= 0.95
+
+
+def test_grasp_cache_is_varied_and_reloads(tmp_path, monkeypatch) -> None:
+    """The generator's grasps differ (yaw, abduction, squeeze, 3- and 4-finger), the disk
+    cache returns the same arrays, and each cached grasp holds (checked on a sample)."""
+    monkeypatch.setenv("IHM_CACHE", str(tmp_path))
+    c = generate_grasps("cube", True, 12, seed=5)
+    assert len(c) == 12 and c.candidates >= 12
+    assert np.ptp(c.qpos[:, 0:12:3]) > 0.2  # abduction varies
+    assert np.ptp(c.ctrl[:, 1::3] - c.qpos[:, 1:12:3]) > 0.02  # flexion squeeze varies
+    grasps = grasp_cache("cylinder", False, 6)
+    assert (tmp_path / "grasps").is_dir() and len(list((tmp_path / "grasps").glob("*.npz"))) == 1
+    from envs import four_finger
+
+    four_finger._MEMORY.clear()
+    again = grasp_cache("cylinder", False, 6)
+    np.testing.assert_array_equal(grasps.qpos, again.qpos)
+    e = FourFingerRotate(object="cylinder", gravity=False, n_grasps=6)
+    assert np.all(e.model.opt.gravity == 0.0)
+    for i in range(len(e.grasps)):
+        e.reset(options={"grasp": i})
+        for _ in range(VERIFY_STEPS):
+            assert not e.step(np.zeros(12, dtype=np.float32))[2]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"object": "teapot"}, "unknown object 'teapot'"),
+        ({"gravity": "yes"}, "gravity must be True or False"),
+        ({"max_setpoint_step": -0.1}, "max_setpoint_step"),
+        ({"frame_skip": 0}, "frame_skip"),
+        ({"render_mode": "human"}, "render_mode"),
+        ({"solver": "magic"}, "unknown solver"),
+    ],
+)
+def test_bad_options(kwargs, message) -> None:
+    with pytest.raises(FourFingerError, match=message):
+        FourFingerRotate(**kwargs)
+
+
+def test_bad_actions(env) -> None:
+    env.reset(seed=0)
+    with pytest.raises(FourFingerError, match=r"shape \(12,\)"):
+        env.step(np.zeros(11))
+    bad = np.zeros(12)
+    bad[3] = np.nan
+    with pytest.raises(FourFingerError, match="NaN"):
+        env.step(bad)
+    with pytest.raises(FourFingerError, match="grasp"):
+        env.reset(options={"grasp": 10_000})
+
+
+def test_setpoint_step_is_clipped(env) -> None:
+    env.reset(seed=2)
+    before = env.data.ctrl.copy()
+    act = np.full(12, 5.0, dtype=np.float32)  # clipped to 1: +0.05 rad, within ctrlrange
+    env.step(act)
+    hi = env.model.actuator_ctrlrange[:, 1]
+    np.testing.assert_allclose(env.data.ctrl, np.minimum(before + 0.05, hi), atol=1e-12)
+
+
+def test_rgb_array_render() -> None:
+    from ihm.render import RenderError
+
+    e = FourFingerRotate(render_mode="rgb_array", width=96, height=64)
+    e.reset(seed=0)
+    try:
+        img = e.render()
+    except RenderError as exc:
+        pytest.skip(f"no offscreen OpenGL here: {exc}")
+    assert img.shape == (64, 96, 3) and img.dtype == np.uint8
+    assert img.std() > 5  # not blank
+    e.close()
+
+
+def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
+    """``python -m train.ppo`` (no task: the rotation main job) with a tiny budget writes the
+    model, normalisation, evaluation, curve; --resume adds steps."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    tiny = [
+        "--total-steps", "256", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64",
+        "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32", "--eval-episodes", "2",
+        "--eval-seconds", "1", "--checkpoint-every", "128", "--no-progress",
+    ]  # fmt: skip
+    p = subprocess.run(
+        [sys.executable, "-m", "train.ppo", *tiny, "--out", str(tmp_path)],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    (run_dir,) = list(tmp_path.iterdir())
+    for f in ("model.zip", "vecnormalize.pkl", "eval.json", "eval.csv", "curve.png"):
+        assert (run_dir / f).is_file(), f
+    res = json.loads((run_dir / "eval.json").read_text())
+    assert res["num_timesteps"] == 256 and res["episodes"] == 2
+    assert 0.0 <= res["drop_rate"] <= 1.0 and np.isfinite(res["speed_rad_s"])
+    assert "rad/s" in p.stdout
+    q = subprocess.run(
+        [sys.executable, "-m", "train.ppo", "--resume", str(run_dir), "--total-steps", "128",
+         "--no-progress"],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert q.returncode == 0, q.stderr[-2000:]
+    assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
