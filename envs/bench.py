@@ -196,7 +196,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
         rate = train_steps_per_second()
         rows.append({"config": "PPO training (4x512, 16 envs)", "env_steps_per_s": round(rate, 1)})
         print(f"PPO training: {rate:.0f} env steps/s including updates")
-    rows.append({"config": "thesis training (server)", "env_steps_per_s": round(THESIS_STEPS_PER_S)})
+    thesis = round(THESIS_STEPS_PER_S)
+    rows.append({"config": "thesis training (server)", "env_steps_per_s": thesis})
     fields = list(rows[0])
     with (out / "four_finger_env.csv").open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=fields)

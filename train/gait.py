@@ -93,7 +93,12 @@ def gait_period(ctrl: np.ndarray, min_lag: int = 4) -> int:
 
 
 def render_strip(
-    env_kwargs: dict, states: np.ndarray, ctrls: np.ndarray, out: Path, speed: float, period_s: float
+    env_kwargs: dict,
+    states: np.ndarray,
+    ctrls: np.ndarray,
+    out: Path,
+    speed: float,
+    period_s: float,
 ) -> None:
     import matplotlib
 
