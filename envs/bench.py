@@ -11,7 +11,10 @@ from the landed model's settings to the shipped env, one change at a time:
 3. ``+ collisions``: palm, catch plane and finger-finger contacts on (what the task needs);
 4. ``+ 2 ms x 25``: the timestep doubled (solref 0.01 s is still 5 timesteps);
 5. ``+ PGS``: the same contact problem solved by PGS instead of Newton;
-6. ``+ fast observation``: the env's own contact path (= the shipped env).
+6. ``+ fast observation``: the env's own contact path;
+7. ``+ torsional friction``: ``condim`` 4 (= the shipped env; what the task needs: without
+   it PPO learned to spin the sphere freely between two antipodal point contacts).
+   ``grasp_from_mujoco`` refuses ``condim`` 4, so this comes after the observation row.
 
 Each row is the median over ``--repeats`` runs of ``--steps`` env steps, with its
 ratio to row 1 measured in the same run. The fidelity columns compare, on a
@@ -70,8 +73,9 @@ def _slow_observe(env: FourFingerRotate) -> Callable[[], np.ndarray]:
     return observe
 
 
-def configure(env: FourFingerRotate, level: int) -> None:
-    """Apply the settings of row ``level`` (1..6) to a fresh env (which is row 6)."""
+def make(level: int) -> FourFingerRotate:
+    """A fresh env with the settings of row ``level`` (1..7; 7 is the shipped env)."""
+    env = FourFingerRotate(torsional=level >= 7)
     m = env.model
     if level <= 4:
         m.opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
@@ -89,6 +93,7 @@ def configure(env: FourFingerRotate, level: int) -> None:
         m.opt.impratio = 1.0
     if level <= 5:
         env._observe = _slow_observe(env)  # type: ignore[method-assign]
+    return env
 
 
 ROWS = (
@@ -98,13 +103,13 @@ ROWS = (
     "+ 2 ms x 25",
     "+ PGS",
     "+ fast observation",
+    "+ torsional friction",
 )
 
 
 def steps_per_second(level: int, steps: int, repeats: int, seed: int = 0) -> list[float]:
     """Env steps/s of row ``level`` (random actions, resets from the grasp cache)."""
-    env = FourFingerRotate()
-    configure(env, level)
+    env = make(level)
     rng = np.random.default_rng(seed)
     out = []
     for r in range(repeats):
@@ -120,8 +125,7 @@ def steps_per_second(level: int, steps: int, repeats: int, seed: int = 0) -> lis
 
 def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
     """Per start grasp: (yaw [rad], x, y, z [m]) of the object after the scripted turn."""
-    env = FourFingerRotate()
-    configure(env, level)
+    env = make(level)
     act = np.zeros(12, dtype=np.float32)
     act[0::3] = 1.0
     res = []

@@ -74,7 +74,8 @@ MuJoCo version.
 ``timestep`` 0.002 s, ``frame_skip`` 25 substeps per policy step (20 Hz, the
 thesis' policy rate); the hand model's own timestep is 0.001 s, and
 ``python -m envs.bench`` compares the two (the policy sees the same motion).
-Elliptic friction cone with ``impratio`` 100 and no noslip pass (see the hand
+Contacts with torsional friction (``condim`` 4, see ``torsional``). Elliptic
+friction cone with ``impratio`` 100 and no noslip pass (see the hand
 model's "Physics" note), solved by PGS instead of the model's Newton solver: the
 same convex problem, 5x cheaper to solve here (README, "Four-finger rotation").
 """
@@ -113,10 +114,11 @@ OBJECTS = ("sphere", "cylinder", "cube")
 CONTACT_LINKS = ff.BODY_NAMES  # f1_proximal, f1_distal, ..., f4_distal: observed links
 DROP_Z = 0.05  # [m] object centre below this: dropped
 OUT_RADIUS = 0.045  # [m] object centre farther than this from the palm axis: out of the hand
+TORSIONAL_FRICTION = 0.005  # [m] the collision class' friction[1]; acts with torsional=True
 MAX_FORCE = 50.0  # [N] observed normal forces are clipped here (impact spikes only)
 VERIFY_STEPS = 40  # policy steps a cached grasp must hold with zero actions
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
-_GENERATOR_VERSION = 1  # bump when generate_grasps changes
+_GENERATOR_VERSION = 2  # bump when generate_grasps changes
 
 
 class FourFingerError(ValueError):
@@ -132,7 +134,9 @@ def _scene(obj: str) -> str:
 SOLVERS = {"pgs": mujoco.mjtSolver.mjSOL_PGS, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 
 
-def _load_model(obj: str, gravity: bool, timestep: float, solver: str = "pgs") -> mujoco.MjModel:
+def _load_model(
+    obj: str, gravity: bool, timestep: float, solver: str = "pgs", torsional: bool = True
+) -> mujoco.MjModel:
     if solver not in SOLVERS:
         raise FourFingerError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     model = mujoco.MjModel.from_xml_path(str(ihm.scenes.scene_path(_scene(obj))))
@@ -140,6 +144,11 @@ def _load_model(obj: str, gravity: bool, timestep: float, solver: str = "pgs") -
     model.opt.solver = SOLVERS[solver]
     if not gravity:
         model.opt.gravity[:] = 0.0
+    if torsional:  # condim 4: the skin's torsional friction (friction[1]) acts
+        obj_body = model.body("object").id
+        for g in range(model.ngeom):
+            if model.geom_bodyid[g] == obj_body or model.geom_contype[g] == 2:
+                model.geom_condim[g] = 4
     return model
 
 
@@ -158,8 +167,15 @@ class GraspCache:
 class _Physics:
     """Model, data and the index arrays of the fast observation path."""
 
-    def __init__(self, obj: str, gravity: bool, timestep: float, solver: str = "pgs") -> None:
-        self.model = m = _load_model(obj, gravity, timestep, solver)
+    def __init__(
+        self,
+        obj: str,
+        gravity: bool,
+        timestep: float,
+        solver: str = "pgs",
+        torsional: bool = True,
+    ) -> None:
+        self.model = m = _load_model(obj, gravity, timestep, solver, torsional)
         self.data = mujoco.MjData(m)
         if m.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC:
             raise FourFingerError("the fast contact path needs the elliptic friction cone")
@@ -342,7 +358,7 @@ def _cache_key(obj: str, gravity: bool, n: int, seed: int, timestep: float, fram
     h = hashlib.sha256()
     for path in (ihm.scenes.scene_path(_scene(obj)), ff.XML):
         h.update(Path(path).read_bytes())
-    h.update(repr((gravity, n, seed, timestep, frame_skip, "pgs", mujoco.__version__)).encode())
+    h.update(repr((gravity, n, seed, timestep, frame_skip, "pgs", "condim4", mujoco.__version__)).encode())
     h.update(repr(_GENERATOR_VERSION).encode())
     return f"{obj}_{'g' if gravity else 'nog'}_{n}_{h.hexdigest()[:16]}"
 
@@ -400,6 +416,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     n_grasps : size of the starting-state cache.
     render_mode : ``None`` or ``"rgb_array"``; ``width``, ``height`` [px];
         ``camera``: ``"side"`` or ``"top"``.
+    torsional : contacts with the skin's torsional friction (``condim`` 4, coefficient
+        ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m x the normal force,
+        that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis' point
+        contact), a sphere pinched between two antipodal points spins freely about the
+        line through them, and PPO learned exactly that (README).
     solver : MuJoCo constraint solver, ``"pgs"`` (default) or ``"newton"`` (the hand
         model's). Both solve the same convex contact problem; PGS is 5x cheaper on it.
     """
@@ -422,6 +443,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         height: int = 480,
         camera: str = "side",
         solver: str = "pgs",
+        torsional: bool = True,
     ) -> None:
         _scene(object)
         if not isinstance(gravity, (bool, np.bool_)):
@@ -452,7 +474,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.action_weight = float(action_weight)
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
-        self._ph = _Physics(object, self.gravity, float(timestep), solver)
+        self._ph = _Physics(object, self.gravity, float(timestep), solver, bool(torsional))
         self.model, self.data = self._ph.model, self._ph.data
         self.dt = self.model.opt.timestep * self.frame_skip
         self.grasps = grasp_cache(

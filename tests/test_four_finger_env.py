@@ -83,24 +83,43 @@ def _link_of(model, geom) -> int:
     return CONTACT_LINKS.index(model.body(model.geom_bodyid[geom]).name)
 
 
+@pytest.fixture(scope="module")
+def point_env():
+    e = FourFingerRotate(torsional=False)  # condim 3: what grasp_from_mujoco reads
+    yield e
+    e.close()
+
+
+@pytest.mark.parametrize("torsional", [False, True])
 @pytest.mark.parametrize("steps", [0, 5, 15])
-def test_observation_matches_grasp_from_mujoco(env, steps) -> None:
+def test_observation_matches_grasp_from_mujoco(env, point_env, steps, torsional) -> None:
     """Per finger link: the mean contact position and summed normal force equal those of
-    ihm.grasp_from_mujoco's contacts on that link, and mj_contactForce's normal component."""
+    ihm.grasp_from_mujoco's contacts on that link (point contacts, condim 3; it refuses
+    condim 4), and mj_contactForce's normal component (both)."""
+    env = env if torsional else point_env
     obs, _ = env.reset(seed=7)
     rng = np.random.default_rng(steps)
     for _ in range(steps):
         obs, *_ = env.step(rng.uniform(-0.3, 0.3, 12).astype(np.float32))
     m, d = env.model, env.data
-    g = grasp_from_mujoco(m, d)
     pos = np.zeros((8, 3))
     fn = np.zeros(8)
     n = np.zeros(8)
-    for k, geom in enumerate(g.hand_geoms):
-        i = _link_of(m, geom)
-        pos[i] += g.points_world()[k]
-        fn[i] += g.forces[k, 0]
-        n[i] += 1
+    if torsional:  # grasp_from_mujoco refuses condim 4: contact positions from mj_data
+        for c in d.contact[: d.ncon]:
+            geoms = (c.geom1, c.geom2)
+            names = [m.body(m.geom_bodyid[g]).name for g in geoms]
+            if "object" in names and any(x in CONTACT_LINKS for x in names):
+                i = CONTACT_LINKS.index(names[0] if names[1] == "object" else names[1])
+                pos[i] += c.pos
+                n[i] += 1
+    else:
+        g = grasp_from_mujoco(m, d)
+        for k, geom in enumerate(g.hand_geoms):
+            i = _link_of(m, geom)
+            pos[i] += g.points_world()[k]
+            fn[i] += g.forces[k, 0]
+            n[i] += 1
     pos[n > 0] /= n[n > 0, None]
     # mj_contactForce directly: the first component is the normal force
     fn_direct = np.zeros(8)
@@ -119,12 +138,57 @@ def test_observation_matches_grasp_from_mujoco(env, steps) -> None:
     feats = obs[24:].reshape(8, 4)
     assert n.sum() >= 2  # a grasp, not an empty hand
     np.testing.assert_allclose(feats[:, :3], pos, atol=1e-6)  # float32 observation
-    np.testing.assert_allclose(feats[:, 3], fn, rtol=1e-5, atol=1e-6)
+    if not torsional:
+        np.testing.assert_allclose(feats[:, 3], fn, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(feats[:, 3], fn_direct, rtol=1e-5, atol=1e-6)
     assert np.all(feats[n == 0] == 0.0)
     assert np.all(feats[n > 0, 3] >= 0.0)
     np.testing.assert_allclose(obs[:12], d.qpos[:12], atol=1e-6)
     np.testing.assert_allclose(obs[12:24], d.ctrl, atol=1e-6)
+
+
+def test_contacts_simulate_the_documented_torsional_friction(env, point_env) -> None:
+    """Read back from mj_data.contact: condim 4 with the skin's torsional coefficient
+    (TORSIONAL_FRICTION) in the default env, plain point contacts with torsional=False."""
+    from envs.four_finger import TORSIONAL_FRICTION
+
+    for e, dim in ((env, 4), (point_env, 3)):
+        e.reset(seed=3)
+        cons = e.data.contact[: e.data.ncon]
+        assert len(cons) >= 2
+        assert all(c.dim == dim for c in cons)
+        assert all(c.friction[0] == pytest.approx(1.0) for c in cons)
+        if dim == 4:
+            assert all(c.friction[2] == pytest.approx(TORSIONAL_FRICTION) for c in cons)
+
+
+def test_torsional_friction_stops_a_free_spin(env, point_env) -> None:
+    """The exploit PPO found with point contacts: a sphere held between two fingertips spins
+    about the line through the contacts without resistance. Fingers 2 and 4 let go, the
+    sphere rests pinched between fingers 1 and 3; spun at 6 rad/s about the line through
+    those contacts it keeps most of its spin for 1 s with condim 3 and loses > 90 % with
+    condim 4."""
+    left = {}
+    for e, name in ((point_env, "point"), (env, "torsional")):
+        e.reset(options={"grasp": 0})
+        d = e.data
+        d.ctrl[[4, 5, 10, 11]] -= 0.5  # f2, f4 flexion setpoints open
+        for _ in range(20):
+            e.step(np.zeros(12, dtype=np.float32))
+        assert d.ncon == 2
+        tips = [c.pos.copy() for c in d.contact[: d.ncon]]
+        centre = d.qpos[ff.NQ : ff.NQ + 3]
+        pairs = [(a, b) for i, a in enumerate(tips) for b in tips[i + 1 :]]
+        a, b = max(pairs, key=lambda p: -np.dot(p[0] - centre, p[1] - centre))  # most opposed
+        axis = (a - b) / np.linalg.norm(a - b)
+        w_world = 6.0 * axis
+        rot = d.xmat[e.model.body("object").id].reshape(3, 3)
+        d.qvel[ff.NV + 3 : ff.NV + 6] = rot.T @ w_world  # free joint: local angular velocity
+        for _ in range(20):
+            e.step(np.zeros(12, dtype=np.float32))
+        w = e.data.xmat[e.model.body("object").id].reshape(3, 3) @ d.qvel[ff.NV + 3 : ff.NV + 6]
+        left[name] = abs(w @ axis) / 6.0
+    assert left["point"] > 0.5 and left["torsional"] < 0.1
 
 
 def test_no_contact_gives_zeros(env) -> None:
