@@ -358,7 +358,8 @@ def _cache_key(obj: str, gravity: bool, n: int, seed: int, timestep: float, fram
     h = hashlib.sha256()
     for path in (ihm.scenes.scene_path(_scene(obj)), ff.XML):
         h.update(Path(path).read_bytes())
-    h.update(repr((gravity, n, seed, timestep, frame_skip, "pgs", "condim4", mujoco.__version__)).encode())
+    settings = (gravity, n, seed, timestep, frame_skip, "pgs", "condim4", mujoco.__version__)
+    h.update(repr(settings).encode())
     h.update(repr(_GENERATOR_VERSION).encode())
     return f"{obj}_{'g' if gravity else 'nog'}_{n}_{h.hexdigest()[:16]}"
 
