@@ -572,6 +572,12 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         from ihm.render import _make_renderer
 
         if self._renderer is None:
+            vis = self.model.vis
+            vis.global_.offwidth = max(vis.global_.offwidth, self.width)
+            vis.global_.offheight = max(vis.global_.offheight, self.height)
+            if self.model.nlight == 0:  # the scenes have no lights: a brighter headlight
+                vis.headlight.ambient[:] = np.maximum(vis.headlight.ambient, 0.35)
+                vis.headlight.diffuse[:] = np.maximum(vis.headlight.diffuse, 0.6)
             self._renderer = _make_renderer(self.model, self.width, self.height)
         cam = mujoco.MjvCamera()
         cam.lookat[:] = [0.0, 0.0, 0.06]

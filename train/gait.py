@@ -50,7 +50,8 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
-    return act, {"object": cfg.get("object", "sphere"), "gravity": cfg.get("gravity", True)}
+    keys = {"object": "sphere", "gravity": True, "torsional": True}
+    return act, {k: cfg.get(k, v) for k, v in keys.items()}
 
 
 def rollout(
@@ -99,6 +100,7 @@ def render_strip(
     out: Path,
     speed: float,
     period_s: float,
+    title: str | None = None,
 ) -> None:
     import matplotlib
 
@@ -132,7 +134,8 @@ def render_strip(
                 ax[row, j].set_title(f"t = {j * period_s / k:.2f} s", fontsize=8)
         ax[row, 0].set_ylabel(cam)
     fig.suptitle(
-        f"one gait period ({period_s:.2f} s) of the learned policy, {speed:.2f} rad/s over the "
+        title
+        or f"one gait period ({period_s:.2f} s) of the learned policy, {speed:.2f} rad/s over the "
         "rollout (top: side view, bottom: top view)",
         fontsize=9,
     )
@@ -148,6 +151,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, float]:
     p.add_argument("--frames", type=int, default=9, help="frames per period (thesis: 9)")
     p.add_argument("--grasp", type=int, default=0, help="start grasp (cache index)")
     p.add_argument("--out", default="bench_out/four_finger_gait.png", help="PNG to write")
+    p.add_argument("--title", default=None, help="figure title (default: period and speed)")
     a = p.parse_args(argv)
     os.environ.setdefault("MUJOCO_GL", "egl")
     act, env_kwargs = load_policy(Path(a.run_dir))
@@ -159,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, float]:
     idx = start + np.round(np.linspace(0, period, a.frames, endpoint=False)).astype(int)
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    render_strip(env_kwargs, r["qpos"][idx], r["ctrl"][idx], out, speed, period * dt)
+    render_strip(env_kwargs, r["qpos"][idx], r["ctrl"][idx], out, speed, period * dt, a.title)
     print(
         f"{a.run_dir}: {speed:.3f} rad/s over {(len(r['angle']) - 1) * dt:.1f} s "
         f"(dropped: {bool(r['dropped'])}), gait period {period} steps = {period * dt:.2f} s; "

@@ -71,6 +71,9 @@ class RotateConfig:
 
     object: str = opt("sphere", "object in the hand", choices=OBJECTS)
     gravity: bool = opt(True, "gravity on (the thesis' hard case)")
+    torsional: bool = opt(
+        True, "torsional friction at the contacts (condim 4; off: point contacts, exploitable)"
+    )
     total_steps: int = opt(
         400_000, "env steps to train (with --resume: steps to add); 3000000 for the long run"
     )
@@ -140,6 +143,7 @@ def make_env(
             ENV_ID,
             object=cfg.object,
             gravity=cfg.gravity,
+            torsional=cfg.torsional,
             drop_weight=cfg.drop_weight,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
