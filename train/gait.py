@@ -82,6 +82,39 @@ def rollout(
     }
 
 
+def evaluate(
+    act: Callable[[np.ndarray], np.ndarray],
+    env_kwargs: dict,
+    episodes: int,
+    seconds: float,
+    seed: int = 0,
+) -> dict[str, float]:
+    """Deterministic policy over ``episodes`` episodes of ``seconds`` from start grasps drawn
+    with ``seed``: mean/median speed [rad/s] (turned angle / episode time; a drop ends an
+    episode) and drop rate."""
+    from envs.four_finger import FourFingerRotate
+
+    env = FourFingerRotate(**env_kwargs)
+    n = int(round(seconds / env.dt))
+    speeds, drops = [], []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)
+        k, info, term = 0, {"rotation_angle": 0.0}, False
+        while k < n and not term:
+            obs, _, term, _, info = env.step(act(obs))
+            k += 1
+        speeds.append(info["rotation_angle"] / (k * env.dt))
+        drops.append(term)
+    env.close()
+    return {
+        "episodes": episodes,
+        "speed_rad_s": float(np.mean(speeds)),
+        "speed_median_rad_s": float(np.median(speeds)),
+        "speed_p10_rad_s": float(np.percentile(speeds, 10)),
+        "drop_rate": float(np.mean(drops)),
+    }
+
+
 def gait_period(ctrl: np.ndarray, min_lag: int = 4) -> int:
     """Period [steps] of the setpoint trajectory: lag of the highest autocorrelation peak
     after the first zero crossing (second half of the rollout, mean removed)."""
@@ -152,9 +185,27 @@ def main(argv: Sequence[str] | None = None) -> dict[str, float]:
     p.add_argument("--grasp", type=int, default=0, help="start grasp (cache index)")
     p.add_argument("--out", default="bench_out/four_finger_gait.png", help="PNG to write")
     p.add_argument("--title", default=None, help="figure title (default: period and speed)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=0,
+        help="also evaluate this many --seconds episodes (start grasps seeded 10000+)",
+    )
+    p.add_argument("--eval-out", default=None, help="JSON file for the --episodes evaluation")
     a = p.parse_args(argv)
     os.environ.setdefault("MUJOCO_GL", "egl")
     act, env_kwargs = load_policy(Path(a.run_dir))
+    if a.episodes:
+        import json
+
+        res = evaluate(act, env_kwargs, a.episodes, a.seconds, seed=10_000)
+        print(
+            f"{a.run_dir}: {res['episodes']} x {a.seconds:g} s episodes: mean "
+            f"{res['speed_rad_s']:.3f} rad/s (median {res['speed_median_rad_s']:.3f}, 10th "
+            f"percentile {res['speed_p10_rad_s']:.3f}), drop rate {res['drop_rate']:.3f}"
+        )
+        if a.eval_out:
+            Path(a.eval_out).write_text(json.dumps(res, indent=2) + "\n")
     r = rollout(act, env_kwargs, a.seconds, a.grasp)
     dt = float(r["dt"])
     speed = float(r["angle"][-1]) / ((len(r["angle"]) - 1) * dt)
