@@ -367,3 +367,11 @@ def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     )  # fmt: skip
     assert q.returncode == 0, q.stderr[-2000:]
     assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
+
+
+def test_gait_period_of_a_periodic_signal() -> None:
+    from train.gait import gait_period
+
+    t = np.arange(400)
+    ctrl = np.stack([np.sin(2 * np.pi * t / 23 + k) for k in range(12)], axis=1)
+    assert gait_period(ctrl) == 23
