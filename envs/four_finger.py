@@ -182,14 +182,15 @@ class _Physics:
         self.obj_body = m.body("object").id
         jnt = m.joint("object")
         self.obj_qpos = int(m.jnt_qposadr[jnt.id])
-        self.slot = np.full(m.ngeom, -1, dtype=np.int64)  # geom -> observed link slot
+        # per geom: observed link slot (-1: none), and whether it is the object's (plain lists:
+        # link_contacts indexes them with Python ints)
+        self.slot = [-1] * m.ngeom
         for k, name in enumerate(CONTACT_LINKS):
             body = m.body(name).id
             for g in range(m.ngeom):
                 if m.geom_bodyid[g] == body and (m.geom_contype[g] or m.geom_conaffinity[g]):
                     self.slot[g] = k
-        self.is_obj = m.geom_bodyid == self.obj_body
-        self.slot_list, self.is_obj_list = self.slot.tolist(), self.is_obj.tolist()
+        self.is_obj = (m.geom_bodyid == self.obj_body).tolist()
         self.ctrl_lo = m.actuator_ctrlrange[:, 0].copy()
         self.ctrl_hi = m.actuator_ctrlrange[:, 1].copy()
 
@@ -218,7 +219,7 @@ class _Physics:
         c = d.contact
         geom, adr, excl = c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist()
         p, ef = c.pos, d.efc_force
-        slot, is_obj = self.slot_list, self.is_obj_list
+        slot, is_obj = self.slot, self.is_obj
         count = [0] * n_links
         k = 0
         for i, (g1, g2) in enumerate(geom):

@@ -76,9 +76,14 @@ __all__ = [
     "make_env",
     "make_eval_envs",
     "make_vec_env",
+    "new_ppo",
     "normalizer",
+    "open_run",
+    "option_problems",
     "parse_config",
+    "progress_bar",
     "run_name",
+    "saved_timesteps",
     "seed_everything",
     "train_callbacks",
 ]
@@ -191,21 +196,56 @@ def parse_config(argv: Sequence[str] | None = None) -> Config:
     parser = build_parser()
     args = parser.parse_args(argv)
     cfg = Config(**vars(args))
-    problems = [
-        f"--{name.replace('_', '-')} must be >= 1"
-        for name in ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs")
-        if getattr(cfg, name) < 1
-    ]
-    problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
-    if cfg.seed < 0:
-        problems.append("--seed must be >= 0")
+    problems = option_problems(cfg, ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs"))
     if cfg.eval_episodes < 0:
         problems.append("--eval-episodes must be >= 0")
-    if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
-        problems.append(f"--resume {cfg.resume}: no model.zip there")
     if problems:
         parser.error("; ".join(problems))
     return cfg
+
+
+def option_problems(cfg: Any, positive: Sequence[str]) -> list[str]:
+    """The checks every PPO config shares: the fields ``positive`` >= 1, net sizes >= 1,
+    ``seed >= 0`` and a ``--resume`` directory that holds a model.zip."""
+    problems = [f"--{k.replace('_', '-')} must be >= 1" for k in positive if getattr(cfg, k) < 1]
+    problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
+    if cfg.seed < 0:
+        problems.append("--seed must be >= 0")
+    if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
+        problems.append(f"--resume {cfg.resume}: no model.zip there")
+    return problems
+
+
+def open_run(cfg: Any, name: str, keep: Sequence[str]) -> tuple[Any, Path]:
+    """The config and directory of a run.
+
+    With ``cfg.resume``: the saved config.json of that run, except the fields ``keep`` (and
+    ``resume``), which come from ``cfg`` (the saved run decides everything except how long
+    to go on and how to report). Otherwise a new directory ``cfg.out/name`` (``_`` appended
+    while it exists) with ``cfg`` written to config.json.
+    """
+    cls = type(cfg)
+    if cfg.resume is not None:
+        run_dir = Path(cfg.resume)
+        saved = json.loads((run_dir / "config.json").read_text())
+        fields = cls.__dataclass_fields__
+        restored = cls(**{k: v for k, v in saved.items() if k in fields})
+        return dataclasses.replace(
+            restored, resume=cfg.resume, **{k: getattr(cfg, k) for k in keep}
+        ), run_dir
+    run_dir = Path(cfg.out) / name
+    while run_dir.exists():  # two runs started in the same second
+        run_dir = run_dir.with_name(run_dir.name + "_")
+    run_dir.mkdir(parents=True)
+    config = {**dataclasses.asdict(cfg), "resume": None}
+    (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    return cfg, run_dir
+
+
+def saved_timesteps(run_dir: Path) -> int:
+    """``num_timesteps`` of the PPO model saved in ``run_dir/model.zip``."""
+    with zipfile.ZipFile(run_dir / "model.zip") as z:
+        return int(json.loads(z.read("data"))["num_timesteps"])
 
 
 def shield_wrapper(name: str) -> Callable[[gym.Env], gym.Env] | None:
@@ -317,10 +357,15 @@ def train_callbacks(cfg: Config, desc: str = "") -> list[BaseCallback]:
     """Training statistics (success and shield intervention rates) and the progress bar."""
     callbacks: list[BaseCallback] = [TrainStats()]
     if cfg.progress:
-        rollout = cfg.n_steps * cfg.n_envs  # learn() stops at the first rollout end past the budget
-        total = -(-cfg.total_steps // rollout) * rollout
-        callbacks.append(TqdmProgress(total, desc=desc))
+        callbacks.append(progress_bar(cfg, desc))
     return callbacks
+
+
+def progress_bar(cfg: Any, desc: str = "") -> TqdmProgress:
+    """A :class:`TqdmProgress` over the steps ``learn(cfg.total_steps)`` will take: it stops at
+    the first rollout end past the budget."""
+    rollout = cfg.n_steps * cfg.n_envs
+    return TqdmProgress(-(-cfg.total_steps // rollout) * rollout, desc=desc)
 
 
 def seed_everything(seed: int) -> None:
@@ -347,14 +392,21 @@ def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
     consecutive seeds), undoing :mod:`train.seeding`; call :func:`seed_everything` first (the
     policy's initial weights come from torch's global generator).
     """
+    learning_rate = (
+        cfg.learning_rate
+        if cfg.lr_schedule == "constant"
+        else LinearSchedule(cfg.learning_rate, 0.0, 1.0)
+    )
+    return new_ppo(cfg, vec_env, learning_rate)
+
+
+def new_ppo(cfg: Any, vec_env: VecEnv, learning_rate: float | Callable[[float], float]) -> PPO:
+    """SB3 PPO from a config's settings: separate policy and value nets ``cfg.pi``/``cfg.vf``,
+    ``seed=None`` (see :func:`build_model`), CPU."""
     return PPO(
         "MlpPolicy",
         vec_env,
-        learning_rate=(
-            cfg.learning_rate
-            if cfg.lr_schedule == "constant"
-            else LinearSchedule(cfg.learning_rate, 0.0, 1.0)
-        ),
+        learning_rate=learning_rate,
         n_steps=cfg.n_steps,
         batch_size=cfg.batch_size,
         n_epochs=cfg.n_epochs,
@@ -563,31 +615,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     cfg = parse_config(argv)
     torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
 
-    if cfg.resume is not None:
-        run_dir = Path(cfg.resume)
-        saved = json.loads((run_dir / "config.json").read_text())
-        # the saved run decides everything except how long to go on and how to report
-        cfg = dataclasses.replace(
-            Config(**{k: v for k, v in saved.items() if k in Config.__dataclass_fields__}),
-            total_steps=cfg.total_steps,
-            eval_episodes=cfg.eval_episodes,
-            progress=cfg.progress,
-            verbose=cfg.verbose,
-            resume=cfg.resume,
-        )
-    else:
-        run_dir = Path(cfg.out) / run_name(cfg)
-        while run_dir.exists():  # two runs started in the same second
-            run_dir = run_dir.with_name(run_dir.name + "_")
-        run_dir.mkdir(parents=True)
-        config = {**dataclasses.asdict(cfg), "resume": None}
-        (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    cfg, run_dir = open_run(
+        cfg, run_name(cfg), keep=("total_steps", "eval_episodes", "progress", "verbose")
+    )
 
     # ---- seeds, all in one place (train.seeding) ---------------------------------------------
-    done_steps = 0
-    if cfg.resume is not None:
-        with zipfile.ZipFile(run_dir / "model.zip") as z:
-            done_steps = int(json.loads(z.read("data"))["num_timesteps"])
+    done_steps = saved_timesteps(run_dir) if cfg.resume is not None else 0
     # a resumed run is a new segment of the seed tree: fresh episodes, no repeated streams
     seeds = RunSeeds(cfg.seed, segment=done_steps)
     seed_everything(seeds.global_seed)  # random, numpy, torch (initial weights, sampling)

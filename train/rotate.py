@@ -26,11 +26,9 @@ rad/s; a drop ends an episode and counts its time so far) and the drop rate.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import sys
 import time
-import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,7 +45,16 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import OBJECTS, grasp_cache
-from train.ppo import TqdmProgress, build_parser, opt, seed_everything
+from train.ppo import (
+    build_parser,
+    new_ppo,
+    open_run,
+    opt,
+    option_problems,
+    progress_bar,
+    saved_timesteps,
+    seed_everything,
+)
 from train.seeding import EnvSeeds, RunSeeds
 
 __all__ = [
@@ -75,7 +82,7 @@ class RotateConfig:
         True, "torsional friction at the contacts (condim 4; off: point contacts, exploitable)"
     )
     total_steps: int = opt(
-        400_000, "env steps to train (with --resume: steps to add); 3000000 for the long run"
+        400_000, "env steps to train (with --resume: steps to add); 1600000 for the long run"
     )
     seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
     n_envs: int = opt(16, "parallel training envs")
@@ -105,24 +112,16 @@ class RotateConfig:
     verbose: int = opt(0, "SB3 verbosity")
 
 
-_FIELDS = set(RotateConfig.__dataclass_fields__)
-
-
 def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
     """Parse the command line into a :class:`RotateConfig` (exit 2 on bad options)."""
     parser = build_parser(RotateConfig, description=(__doc__ or "").split("\n\n")[0])
     cfg = RotateConfig(**vars(parser.parse_args(argv)))
     ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
-    problems = [f"--{k.replace('_', '-')} must be >= 1" for k in ints if getattr(cfg, k) < 1]
-    problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
-    if cfg.seed < 0:
-        problems.append("--seed must be >= 0")
+    problems = option_problems(cfg, ints)
     if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1:
         problems.append("--eval-episodes must be >= 0, --checkpoint-every and --threads >= 1")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
-    if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
-        problems.append(f"--resume {cfg.resume}: no model.zip there")
     if problems:
         parser.error("; ".join(problems))
     return cfg
@@ -160,26 +159,8 @@ def make_env(
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
-    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``)."""
-    return PPO(
-        "MlpPolicy",
-        vec_env,
-        learning_rate=cfg.learning_rate,
-        n_steps=cfg.n_steps,
-        batch_size=cfg.batch_size,
-        n_epochs=cfg.n_epochs,
-        gamma=cfg.gamma,
-        gae_lambda=cfg.gae_lambda,
-        clip_range=cfg.clip_range,
-        ent_coef=cfg.ent_coef,
-        policy_kwargs={
-            "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
-            "log_std_init": cfg.log_std_init,
-        },
-        seed=None,
-        device="cpu",
-        verbose=cfg.verbose,
-    )
+    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), constant lr."""
+    return new_ppo(cfg, vec_env, cfg.learning_rate)
 
 
 def evaluate_rotation(
@@ -365,31 +346,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume), evaluate, save; returns the final evaluation."""
     cfg = parse_config(argv)
     torch.set_num_threads(cfg.threads)
-    if cfg.resume is not None:
-        run_dir = Path(cfg.resume)
-        saved = json.loads((run_dir / "config.json").read_text())
-        cfg = dataclasses.replace(
-            RotateConfig(**{k: v for k, v in saved.items() if k in _FIELDS}),
-            total_steps=cfg.total_steps,
-            progress=cfg.progress,
-            verbose=cfg.verbose,
-            resume=cfg.resume,
-            threads=cfg.threads,
-        )
-    else:
-        name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-        run_dir = Path(cfg.out) / name
-        while run_dir.exists():
-            run_dir = run_dir.with_name(run_dir.name + "_")
-        run_dir.mkdir(parents=True)
-        config = {**dataclasses.asdict(cfg), "resume": None}
-        (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
-
+    name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+    cfg, run_dir = open_run(cfg, name, keep=("total_steps", "progress", "verbose", "threads"))
     grasp_cache(cfg.object, cfg.gravity)  # build the start-state cache once, before any worker
-    done = 0
-    if cfg.resume is not None:
-        with zipfile.ZipFile(run_dir / "model.zip") as z:
-            done = int(json.loads(z.read("data"))["num_timesteps"])
+    done = saved_timesteps(run_dir) if cfg.resume is not None else 0
     seeds = RunSeeds(cfg.seed, segment=done)
     seed_everything(seeds.global_seed)
     mon = run_dir / "monitor"
@@ -415,9 +375,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every)
     callbacks: list[BaseCallback] = [ev]
     if cfg.progress:
-        rollout = cfg.n_steps * cfg.n_envs
-        total = -(-cfg.total_steps // rollout) * rollout
-        callbacks.append(TqdmProgress(total, desc=run_dir.name))
+        callbacks.append(progress_bar(cfg, desc=run_dir.name))
     t0 = time.perf_counter()
     model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
     train_s = time.perf_counter() - t0
