@@ -12,19 +12,25 @@ from the landed model's settings to the shipped env, one change at a time:
 4. ``+ 2 ms x 25``: the timestep doubled (solref 0.01 s is still 5 timesteps);
 5. ``+ PGS``: the same contact problem solved by PGS instead of Newton;
 6. ``+ fast observation``: the env's own contact path;
-7. ``+ torsional friction``: ``condim`` 4 (= the shipped env; what the task needs: without
-   it PPO learned to spin the sphere freely between two antipodal point contacts).
-   ``grasp_from_mujoco`` refuses ``condim`` 4, so this comes after the observation row.
+7. ``+ torsional friction``: ``condim`` 4 (what the task needs: without it PPO learned to
+   spin the sphere freely between two antipodal point contacts). ``grasp_from_mujoco``
+   refuses ``condim`` 4, so this comes after the observation row;
+8. ``+ solver tolerance 1e-6``: PGS stops at 1e-6 instead of MuJoCo's 1e-8 (= the shipped
+   env);
+9. ``+ 2.5 ms x 20 (not shipped)``: the timestep 2.5 ms (solref 0.01 s is 4 timesteps): what
+   a further cut of the substeps would buy, and what it changes.
 
-Each row is the median over ``--repeats`` runs of ``--steps`` env steps, with its
-ratio to row 1 measured in the same run. The fidelity columns compare, on a
+Each row is the median over ``--repeats`` runs of ``--steps`` env steps (the rows take
+turns), with its ratio to row 1 measured in the same run. The fidelity columns compare, on a
 scripted turn (abduction setpoints +0.05 rad for 6 steps, then 6 steps of zero
 action) from 8 cached grasps, the object's yaw and position at the end with
 those of row 2's physics (median over the grasps).
 
 ``--train`` adds PPO training throughput (env steps/s including the updates) with
 ``python -m train.ppo``'s default settings (4 x 512 nets, 16 envs, 6,144-step
-rollouts), beside the thesis' 474 env steps/s (15.36M steps in about 9 h).
+rollouts), the envs stepped in the training process and in 2 worker processes
+(``train.vec.ChunkedVecEnv``, the default), beside the thesis' 474 env steps/s
+(15.36M steps in about 9 h).
 
 Writes ``--out``/four_finger_env.csv and four_finger_env.png.
 """
@@ -40,7 +46,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from envs.four_finger import FourFingerRotate
+from envs.four_finger import FRAME_SKIP, TIMESTEP, FourFingerRotate, grasp_cache
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
 from stability import GraspError
@@ -74,9 +80,12 @@ def _slow_observe(env: FourFingerRotate) -> Callable[[], np.ndarray]:
 
 
 def make(level: int) -> FourFingerRotate:
-    """A fresh env with the settings of row ``level`` (1..7; 7 is the shipped env)."""
-    env = FourFingerRotate(torsional=level >= 7)
+    """A fresh env with the settings of row ``level`` (1..9; ``SHIPPED`` is the shipped env)."""
+    timestep, frame_skip = (0.0025, 20) if level >= 9 else (TIMESTEP, FRAME_SKIP)
+    env = FourFingerRotate(torsional=level >= 7, timestep=timestep, frame_skip=frame_skip)
     m = env.model
+    if level <= 7:
+        m.opt.tolerance = 1e-8  # MuJoCo's default
     if level <= 4:
         m.opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
     if level <= 3:
@@ -104,28 +113,35 @@ ROWS = (
     "+ PGS",
     "+ fast observation",
     "+ torsional friction",
+    "+ solver tolerance 1e-6 (shipped)",
+    "+ 2.5 ms x 20 (not shipped)",
 )
+SHIPPED = 8
 
 
-def steps_per_second(level: int, steps: int, repeats: int, seed: int = 0) -> list[float]:
-    """Env steps/s of row ``level`` (random actions, resets from the grasp cache)."""
-    env = make(level)
+def steps_per_second(levels: Sequence[int], steps: int, repeats: int, seed: int = 0) -> dict:
+    """Env steps/s per row in ``levels`` (random actions, resets from the grasp cache); the
+    rows take turns, repeat by repeat, so that the machine's slow phases hit all alike."""
+    envs = {level: make(level) for level in levels}
     rng = np.random.default_rng(seed)
-    out = []
+    out: dict[int, list[float]] = {level: [] for level in levels}
     for r in range(repeats):
-        env.reset(seed=seed + r)
         acts = rng.uniform(-1, 1, (steps, 12)).astype(np.float32)
-        t = time.perf_counter()
-        for a in acts:
-            if env.step(a)[2]:
-                env.reset()
-        out.append(steps / (time.perf_counter() - t))
+        for level, env in envs.items():
+            env.reset(seed=seed + r)
+            t = time.perf_counter()
+            for a in acts:
+                if env.step(a)[2]:
+                    env.reset()
+            out[level].append(steps / (time.perf_counter() - t))
     return out
 
 
 def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
-    """Per start grasp: (yaw [rad], x, y, z [m]) of the object after the scripted turn."""
+    """Per start grasp: (yaw [rad], x, y, z [m]) of the object after the scripted turn, from
+    the shipped env's cached grasps ``grasps`` (the same start states for every row)."""
     env = make(level)
+    env.grasps = grasp_cache("sphere", True)
     act = np.zeros(12, dtype=np.float32)
     act[0::3] = 1.0
     res = []
@@ -137,23 +153,26 @@ def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
     return np.array(res)
 
 
-def train_steps_per_second(total: int = 12_288) -> float:
-    """PPO training throughput with train.ppo's defaults, env steps/s including updates."""
+def train_steps_per_second(total: int = 12_288, workers: int = 0) -> float:
+    """PPO training throughput with train.ppo's defaults, env steps/s including updates;
+    ``workers`` processes step the 16 envs (0: the training process, ``DummyVecEnv``)."""
     import torch
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import VecNormalize
 
     from train import rotate
     from train.seeding import RunSeeds
+    from train.vec import make_vec_env
 
     cfg = rotate.RotateConfig()
     torch.set_num_threads(cfg.threads)
-    vec = VecNormalize(
-        DummyVecEnv([rotate.make_env(cfg, s) for s in RunSeeds(0).envs("train", cfg.n_envs)])
-    )
+    thunks = [rotate.make_env(cfg, s) for s in RunSeeds(0).envs("train", cfg.n_envs)]
+    vec = VecNormalize(make_vec_env(thunks, workers))
     model = rotate.build_model(cfg, vec)
+    cb = rotate.RolloutThreads(cfg.threads) if workers else None
+    model.learn(cfg.n_steps * cfg.n_envs, callback=cb)  # warm-up: worker start, first update
     t = time.perf_counter()
-    model.learn(total)
-    rate = model.num_timesteps / (time.perf_counter() - t)
+    model.learn(total, callback=cb, reset_num_timesteps=False)
+    rate = total / (time.perf_counter() - t)
     vec.close()
     return rate
 
@@ -171,8 +190,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     ref = scripted_turn(2)
     rows: list[dict[str, object]] = []
     base = None
+    rates = steps_per_second(range(1, len(ROWS) + 1), a.steps, a.repeats)
     for level, name in enumerate(ROWS, start=1):
-        sps = steps_per_second(level, a.steps, a.repeats)
+        sps = rates[level]
         med = float(np.median(sps))
         base = base or med
         turn = scripted_turn(level)
@@ -197,9 +217,12 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             f"{r['pos_diff_mm']:.3f} mm"
         )
     if a.train:
-        rate = train_steps_per_second()
-        rows.append({"config": "PPO training (4x512, 16 envs)", "env_steps_per_s": round(rate, 1)})
-        print(f"PPO training: {rate:.0f} env steps/s including updates")
+        for workers in (0, 2):
+            rate = train_steps_per_second(workers=workers)
+            where = f"{workers} worker processes" if workers else "in-process"
+            name = f"PPO training (4x512, 16 envs {where})"
+            rows.append({"config": name, "env_steps_per_s": round(rate, 1)})
+            print(f"{name}: {rate:.0f} env steps/s including updates")
     thesis = round(THESIS_STEPS_PER_S)
     rows.append({"config": "thesis training (server)", "env_steps_per_s": thesis})
     fields = list(rows[0])

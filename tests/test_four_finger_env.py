@@ -22,12 +22,16 @@ import envs  # noqa: F401  (registers the ids)
 from envs.four_finger import (
     CONTACT_LINKS,
     DROP_Z,
+    FRAME_SKIP,
     N_OBS,
+    SOLVER_TOLERANCE,
+    TIMESTEP,
     VERIFY_STEPS,
     FourFingerError,
     FourFingerRotate,
     generate_grasps,
     grasp_cache,
+    yaw_rate,
 )
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
@@ -231,6 +235,34 @@ def test_reward_sign_and_terms() -> None:
     assert info["rotation_angle"] == pytest.approx(sum(fwd) * e.dt, rel=1e-9)
     back = [e.step(-act)[4]["rotation"] for _ in range(4)]
     assert sum(back) < 0.0
+
+
+def test_yaw_rate_equals_mujocos_quaternion_velocity() -> None:
+    """The float-arithmetic reward equals ``mju_quat2Vel(q1 * conj(q0), dt)[2]`` for small
+    steps, large turns (past pi: the short way round) and no turn at all."""
+    rng = np.random.default_rng(0)
+    for i in range(500):
+        q0 = rng.normal(size=4)
+        q0 /= np.linalg.norm(q0)
+        q1 = rng.normal(size=4) if i % 2 else q0 + 0.05 * rng.normal(size=4)
+        q1 = q0 if i == 0 else q1 / np.linalg.norm(q1)
+        inv, rel, vel = np.zeros(4), np.zeros(4), np.zeros(3)
+        mujoco.mju_negQuat(inv, q0)
+        mujoco.mju_mulQuat(rel, q1, inv)
+        mujoco.mju_quat2Vel(vel, rel, 0.05)
+        assert yaw_rate(q0, q1, 0.05) == pytest.approx(vel[2], rel=1e-9, abs=1e-12)
+
+
+def test_mujoco_runs_the_documented_solver_settings(env) -> None:
+    """What the docstring and README state is what MuJoCo simulates: PGS, tolerance 1e-6,
+    2 ms x 25 substeps (a 0.05 s policy step), elliptic cone with impratio 100, no noslip."""
+    opt = env.unwrapped.model.opt
+    assert opt.solver == mujoco.mjtSolver.mjSOL_PGS
+    assert opt.tolerance == SOLVER_TOLERANCE == 1e-6
+    assert opt.timestep == TIMESTEP == 0.002 and env.unwrapped.frame_skip == FRAME_SKIP == 25
+    assert env.unwrapped.dt == pytest.approx(0.05)
+    assert opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and opt.impratio == 100.0
+    assert opt.noslip_iterations == 0
 
 
 def test_drop_terminates_with_the_penalty() -> None:

@@ -41,7 +41,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import OBJECTS, grasp_cache
@@ -56,6 +56,7 @@ from train.ppo import (
     seed_everything,
 )
 from train.seeding import EnvSeeds, RunSeeds
+from train.vec import make_vec_env
 
 __all__ = [
     "EvalCallback",
@@ -86,8 +87,8 @@ class RotateConfig:
     )
     seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
     n_envs: int = opt(16, "parallel training envs")
-    subproc: bool = opt(
-        False, "step the envs in subprocesses (SubprocVecEnv; one per env, pays off with cores)"
+    workers: int = opt(
+        2, "processes that step the training envs, each its share (train.vec); 0: in this one"
     )
     pi: list[int] = opt([512, 512, 512, 512], "hidden layers of the policy net (thesis: 4 x 512)")
     vf: list[int] = opt([512, 512, 512, 512], "hidden layers of the separate value net")
@@ -118,8 +119,10 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
     cfg = RotateConfig(**vars(parser.parse_args(argv)))
     ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
     problems = option_problems(cfg, ints)
-    if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1:
-        problems.append("--eval-episodes must be >= 0, --checkpoint-every and --threads >= 1")
+    if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1 or cfg.workers < 0:
+        problems.append(
+            "--eval-episodes and --workers must be >= 0, --checkpoint-every and --threads >= 1"
+        )
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if problems:
@@ -210,6 +213,27 @@ def evaluate_rotation(
         "speed_median_rad_s": float(np.median(speeds)) if speeds else float("nan"),
         "drop_rate": float(np.mean(drops)) if drops else float("nan"),
     }
+
+
+class RolloutThreads(BaseCallback):
+    """Torch on one thread while collecting rollouts, ``threads`` for the update.
+
+    With worker processes stepping the envs, two torch threads in the training process
+    spin between the small forward passes and take the workers' cores (measured: 2 workers
+    became slower than none)."""
+
+    def __init__(self, threads: int) -> None:
+        super().__init__()
+        self.threads = threads
+
+    def _on_rollout_start(self) -> None:
+        torch.set_num_threads(1)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        torch.set_num_threads(self.threads)
 
 
 class EvalCallback(BaseCallback):
@@ -347,7 +371,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     cfg = parse_config(argv)
     torch.set_num_threads(cfg.threads)
     name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-    cfg, run_dir = open_run(cfg, name, keep=("total_steps", "progress", "verbose", "threads"))
+    keep = ("total_steps", "progress", "verbose", "threads", "workers")
+    cfg, run_dir = open_run(cfg, name, keep=keep)
     grasp_cache(cfg.object, cfg.gravity)  # build the start-state cache once, before any worker
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
     seeds = RunSeeds(cfg.seed, segment=done)
@@ -358,7 +383,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
         for i, s in enumerate(seeds.envs("train", cfg.n_envs))
     ]
-    vec: VecEnv = SubprocVecEnv(thunks) if cfg.subproc and len(thunks) > 1 else DummyVecEnv(thunks)
+    vec: VecEnv = make_vec_env(thunks, cfg.workers)
     stats = run_dir / "vecnormalize.pkl"
     if cfg.resume is not None and stats.is_file():
         vec = VecNormalize.load(str(stats), vec)
@@ -374,6 +399,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
     ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every)
     callbacks: list[BaseCallback] = [ev]
+    if cfg.workers:
+        callbacks.append(RolloutThreads(cfg.threads))
     if cfg.progress:
         callbacks.append(progress_bar(cfg, desc=run_dir.name))
     t0 = time.perf_counter()
