@@ -191,6 +191,9 @@ class ExactProblem:
         Default 0 (the thesis' one-shot model: commands and disturbance applied together).
         A disturbance applied after a commanded preload uses the preload's ``q`` (a
         nonbackdrivable transmission locks where the preload left it).
+    command_range : (lower, upper) arrays, optional
+        The commands are variables ``f_c`` (``self.fc``) in ``[lower, upper]`` instead of
+        ``hand[1]`` (query OptimalCommands): ``f - f_c in [0, E]`` and ``z = 0 => f = f_c``.
     """
 
     def __init__(
@@ -203,6 +206,7 @@ class ExactProblem:
         friction: bool = True,
         name: str = "exact",
         hand_reference: NDArray[np.float64] | None = None,
+        command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> None:
         if not isinstance(edges, int | np.integer) or edges < 3:
             raise GraspError(f"edges (friction polygon sides) must be an int >= 3, got {edges!r}")
@@ -216,7 +220,8 @@ class ExactProblem:
         self.c = M.add_vars(m * k, lo, hi, "C", "c").reshape(m, k)
         self.u = M.add_vars(m, 0.0, B, "C", "u")
         self.y = M.add_vars(m, 0, 1, "B", "y")
-        self.q = self.f = self.v = self.z = self.hand_reference = None
+        self.q = self.f = self.v = self.z = self.hand_reference = self.fc = None
+        self.spring_rows: list[int] = []
         self.G = _clean(g.G)  # (wrench_dim, k m), round-off entries zeroed
         Gt = self.G.T.reshape(m, k, -1)
         self.J = None if g.J is None else _clean(g.J)
@@ -225,7 +230,15 @@ class ExactProblem:
             R, fc = hand
             nl, na = R.shape
             self.q = M.add_vars(nl, -INF, INF, "C", "q")
-            self.f = M.add_vars(na, fc, fc + bounds.excess, "C", "f")
+            if command_range is None:
+                self.f = M.add_vars(na, fc, fc + bounds.excess, "C", "f")
+            else:
+                lo_c, hi_c = command_range
+                self.fc = M.add_vars(na, lo_c, hi_c, "C", "fc")
+                self.f = M.add_vars(na, lo_c, hi_c + bounds.excess, "C", "f")
+                for a in range(na):  # 0 <= f - f_c <= E
+                    M.add_row([self.f[a], self.fc[a]], [1.0, -1.0], 0.0, float(bounds.excess[a]),
+                              f"excess{a}")  # fmt: skip
             self.v = M.add_vars(na, 0.0, bounds.motion, "C", "v")
             self.z = M.add_vars(na, 0, 1, "B", "z")
         for i in range(m):
@@ -234,7 +247,8 @@ class ExactProblem:
             idx, val = self._extend(idx, val, self.r, Gt[i, 0])
             if Jn is not None:
                 idx, val = self._extend(idx, val, self.q, -Jn[i])
-            M.add_constraint(idx, val, "==", float(preload[i]), f"spring{i}")
+            self.spring_rows.append(M.add_constraint(idx, val, "==", float(preload[i]),
+                                                     f"spring{i}"))  # fmt: skip
             M.add_indicator(self.y[i], [self.u[i]], [1.0], "<=", 0.0, 1, f"closed{i}")
             M.add_indicator(self.y[i], [self.c[i, 0]], [1.0], "<=", 0.0, 0, f"open{i}")
         if friction:
@@ -251,7 +265,12 @@ class ExactProblem:
                 idx, val = self._extend([self.v[a]], [-1.0], self.q, R[:, a])
                 M.add_constraint(idx, val, "==", float(ref[a]), f"transmission{a}")
                 M.add_indicator(self.z[a], [self.v[a]], [1.0], "<=", 0.0, 1, f"locked{a}")
-                M.add_indicator(self.z[a], [self.f[a]], [1.0], "<=", float(fc[a]), 0, f"moving{a}")
+                if self.fc is None:
+                    M.add_indicator(self.z[a], [self.f[a]], [1.0], "<=", float(fc[a]), 0,
+                                    f"moving{a}")  # fmt: skip
+                else:
+                    M.add_indicator(self.z[a], [self.f[a], self.fc[a]], [1.0, -1.0], "<=", 0.0,
+                                    0, f"moving{a}")  # fmt: skip
 
     @staticmethod
     def _extend(idx, val, var, coef) -> tuple[list, list]:
@@ -368,7 +387,7 @@ class ExactProblem:
         q = f = z = None
         if self.hand is not None:
             q, f, z = x[self.q], x[self.f], np.round(x[self.z]) == 1
-            fc = self.hand[1]
+            fc = self.hand[1] if self.fc is None else x[self.fc]
             at = at or bool(np.any(x[self.v] >= 0.99 * self.bounds.motion))
             at = at or bool(np.any(f - fc >= 0.99 * self.bounds.excess))
         return ExactPoint(c, x[self.r], q, f, np.round(x[self.y]) == 1, z, at, x)

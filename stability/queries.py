@@ -48,10 +48,14 @@ class MaxDisturbance:
 
 @dataclass(frozen=True)
 class OptimalCommands:
-    """Actuator commands that make ``wrench`` stable at least cost (chapter 6).
+    """Actuator commands ``f_c`` that make ``wrench`` stable at least cost (chapter 6).
 
-    ``lower``/``upper`` bound the commands [N or N m per actuator]; the cost is
-    ``weights . f`` (default: the sum of commands).
+    ``objective="max"`` (the thesis'): minimise the largest command ``max_j f_c,j``;
+    ``"weighted"``: minimise ``weights . f_c`` (default weights: ones, the sum).
+    ``lower``/``upper`` bound the commands per actuator [N or N m] (default ``0`` and a
+    bound from the problem's force scale, flagged ``at_bound`` when reached);
+    ``max_normal_force`` [N] caps every contact normal force (not to crush the object).
+    ``value`` is the optimal cost and ``Solution.commands`` the commands.
     """
 
     wrench: ArrayLike
@@ -59,6 +63,8 @@ class OptimalCommands:
     lower: ArrayLike | None = None
     upper: ArrayLike | None = None
     weights: ArrayLike | None = None
+    objective: str = "max"
+    max_normal_force: float | None = None
 
 
 Query = Existence | MaxDisturbance | OptimalCommands

@@ -120,6 +120,8 @@ class Solution:
         carries an answer: the others have ``stable=None``.
     actuator_forces : (a,) array or None
         Hands: actuator forces ``f`` with ``J^T c = R f`` [N or N m].
+    commands : (a,) array or None
+        OptimalCommands: the optimal actuator commands ``f_c``.
     hand_reference : (l,) array or None
         Hands: the joint motion ``q_ref`` where the nonbackdrivable actuators lock
         (``R^T (q - q_ref) >= 0``); None means 0 (commands and disturbance applied at once).
@@ -143,6 +145,7 @@ class Solution:
     actuator_forces: NDArray[np.float64] | None = None
     hand_reference: NDArray[np.float64] | None = None
     conditions: tuple[str, ...] | None = None
+    commands: NDArray[np.float64] | None = None
 
     @property
     def wrench(self) -> NDArray[np.float64]:
@@ -168,6 +171,10 @@ class Solution:
             preload = self.grasp.per_contact(q.preload, "preload")
         if isinstance(q, Existence | MaxDisturbance) and q.commands is not None:
             commands = np.asarray(q.commands, dtype=float)
+        if self.commands is not None:  # OptimalCommands: the commands found
+            commands = self.commands
+        if not isinstance(q, Existence | MaxDisturbance) and self.motion is not None:
+            preload = self.grasp.per_contact(q.preload, "preload")
         return model_residuals(
             self.grasp,
             self.wrench,

@@ -1,0 +1,522 @@
+"""``method="refinement"``: Coulomb friction with maximum dissipation by hierarchical
+refinement of a convex relaxation (thesis ch. 6, Algorithm refinement).
+
+Per spatial contact ``i`` the tangent plane is spanned by an ordered, cyclic list of
+friction edges ``e_s = (cos th_s, sin th_s)`` (in the contact's ``(t1, t2)`` frame) of
+lengths ``l_s``. Friction and the *negative* tangential motion are positive combinations
+of the same edges (eqs. betas, alphas)::
+
+    c_t = sum_s beta_s l_s e_s,     -d_t = sum_s alpha_s l_s e_s,     beta, alpha >= 0
+
+and one SOS2 ``z_i`` (``K + 1`` members, the last one edge 1 again: the list is cyclic)
+lets only two neighbouring edges carry either (eqs. sos_beta, sos_alpha): friction lies in
+the sector of the negative motion. The magnitude (eq. fric_refine, indicator ``w_i``)::
+
+    sum_s beta_s <= mu c_n                        (inside the outer polygon, always)
+    w_i = 0  =>  sum_s alpha_s = 0                (no sliding)
+    w_i = 1  =>  sum_s l_s beta_s >= mu c_n       (sliding: outside the inscribed chord)
+
+Edge lengths (eqs. l1, length): the initial ``K0`` edges (angle ``gamma = 2 pi / K0``
+between neighbours, ``initial_edges`` 4 or 8) are sectors of level 1, and a sector of
+level ``p`` (angle ``gamma / 2^(p-1)``) has edges of length
+
+    l_p = prod_{r=p}^{q+1} sec(gamma / 2^r),
+
+so the outer polygon of a sector contains those of its two halves (the bisecting edge of
+length ``l_{p+1}`` ends on the parent's outer side) and the chords of the halves lie
+outside the parent's chord: every relaxation contains every finer one and, at every level,
+the exact cone with maximum dissipation. Hence **infeasible at any level means unstable**
+(reported at once), and an optimum never improves with refinement. At level ``q + 1``
+(angle ``gamma / 2^q``) the outer sides are tangent to the cone (``l_{q+1} = sec(gamma /
+2^(q+1))``).
+
+Refinement (Algorithm refinement): after each MIP, a contact's sector is halved (three
+edges of length ``l_{p+1}`` along its two edges and its bisector, redundant edges removed)
+where the answer needs it: the sector of a sliding contact's motion and friction, and of
+a sticking contact's friction when it lies outside the exact cone (``|c_t| > mu c_n``).
+Refinement stops when no such sector is coarser than ``gamma / 2^q``. The answer then
+satisfies the relaxation at uniform resolution ``K0 2^q`` (``refine=False`` solves that
+one MIP from the start: the thesis' "full resolution"), with friction at most
+``l_{q+1} - 1`` times ``mu c_n`` outside the cone (``stats["cone_excess"]``).
+
+Robustness to contact-normal error ``eta`` (``normal_uncertainty``, radians; sec. robust,
+eq. uncertainty): the spring law uses the worst normal within ``eta``,
+``d_n' = d_n cos(eta) - |d_t| sin(eta)``, with ``|d_t|`` estimated by ``sum_s alpha_s``.
+That estimate is ``<= |d_t|`` (the edges' outer polygon contains the unit circle) and exact
+at a finest sector's bisector (where the thesis' ``sum l_{p+1} alpha_s`` is the same); at
+coarse levels it is smaller than the thesis' (``1/l_p`` vs ``l_{p+1}/l_p`` at an edge)
+because the thesis' estimate is not monotone under refinement (at the parent's bisector its
+children estimate ``cos(gamma/2^(p+1)) < 1``), which would break the guarantee above.
+With ``eta > 0`` the spring law of the *nominal* normals is not what is solved, so it is
+not among the enforced ``Solution.conditions``.
+
+Queries, all by the same loop: ``Existence`` (feasibility), ``MaxDisturbance`` (maximise
+``s``, one MIP per level, no bisection), ``OptimalCommands`` (minimise the largest command,
+or ``weights . f_c``; per-actuator ``lower``/``upper``; ``max_normal_force``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._mipcommon import (
+    CONDITIONS,
+    MipOptions,
+    QueryData,
+    Stop,
+    bounds_stats,
+    run,
+    solution,
+    stopped,
+)
+from .api import register
+from .errors import GraspError
+from .exact import ExactBounds, ExactPoint, ExactProblem, hand_data, scale_bounds
+from .grasp import Grasp
+from .mip import INF
+from .queries import Existence, MaxDisturbance, OptimalCommands
+from .solution import Solution
+
+__all__ = ["EdgeSet", "edge_length"]
+
+_REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
+                "motion_bound")  # fmt: skip
+TWO_PI = 2.0 * math.pi
+
+
+def edge_length(p: int, gamma: float, q: int) -> float:
+    """``l_p = prod_{r=p}^{q+1} sec(gamma / 2^r)`` (thesis eqs. l1, length)."""
+    return math.prod(1.0 / math.cos(gamma / 2.0**r) for r in range(p, q + 2))
+
+
+@dataclass
+class EdgeSet:
+    """One contact's friction edges: angles ``theta`` [rad, in ``[0, 2 pi)``] in cyclic
+    order and the level ``p`` each was made for (its length is ``l_p``)."""
+
+    theta: list[float]
+    level: list[int]
+    gamma: float
+    q: int
+    lengths: dict[int, float] = field(default_factory=dict)
+
+    @classmethod
+    def uniform(cls, k: int, level: int, gamma: float, q: int) -> EdgeSet:
+        th = [TWO_PI * j / k for j in range(k)]
+        return cls(th, [level] * k, gamma, q)
+
+    def __len__(self) -> int:
+        return len(self.theta)
+
+    def length(self, s: int) -> float:
+        p = self.level[s]
+        if p not in self.lengths:
+            self.lengths[p] = edge_length(p, self.gamma, self.q)
+        return self.lengths[p]
+
+    def width(self, j: int) -> float:
+        """Angle of sector ``j`` (edges ``j`` and ``j + 1``, cyclic) [rad]; 0 if degenerate."""
+        k = len(self.theta)
+        if k == 1:
+            return TWO_PI
+        w = (self.theta[(j + 1) % k] - self.theta[j]) % TWO_PI
+        return 0.0 if w < 1e-12 else w
+
+    def finest_width(self) -> float:
+        return self.gamma / 2.0**self.q
+
+    def sectors_at(self, phi: float, tol: float = 1e-9) -> list[int]:
+        """The non-degenerate sectors whose closed arc contains direction ``phi``."""
+        out = []
+        for j in range(len(self.theta)):
+            w = self.width(j)
+            if w == 0.0:
+                continue
+            off = (phi - self.theta[j]) % TWO_PI
+            if off <= w + tol or off >= TWO_PI - tol:
+                out.append(j)
+        return out
+
+    def refine(self, j: int) -> bool:
+        """Halve sector ``j``: edges of level ``p + 1`` along its edges and bisector; then
+        drop redundant edges. False if the sector is already at the finest width."""
+        w = self.width(j)
+        if w <= self.finest_width() * (1 + 1e-9):
+            return False
+        k = len(self.theta)
+        a, b = self.theta[j], self.theta[(j + 1) % k]
+        p = self.level[j] + 1
+        new = [(a, p), ((a + w / 2.0) % TWO_PI, p), (b, p)]
+        edges = list(zip(self.theta, self.level, strict=True))
+        edges[j + 1 : j + 1] = new
+        self.theta, self.level = (list(x) for x in zip(*_dedupe(edges), strict=True))
+        return True
+
+
+def _dedupe(edges: list[tuple[float, int]]) -> list[tuple[float, int]]:
+    """Collapse each cyclic run of edges along one direction to its first and last (one if
+    they have the same level): the two sectors it separates need only their own edges."""
+    n = len(edges)
+
+    def same(i: int, j: int) -> bool:
+        d = abs(edges[i % n][0] - edges[j % n][0]) % TWO_PI
+        return min(d, TWO_PI - d) < 1e-12
+
+    # rotate so that the list starts at the beginning of a run
+    start = next((i for i in range(n) if not same(i - 1, i)), 0)
+    edges = edges[start:] + edges[:start]
+    out: list[tuple[float, int]] = []
+    i = 0
+    while i < n:
+        j = i
+        while j + 1 < n and same(j, j + 1):
+            j += 1
+        first, last = edges[i], edges[j]
+        out.append(first)
+        if j > i and last[1] != first[1]:
+            out.append(last)
+        i = j + 1
+    return out
+
+
+@dataclass
+class _Opts:
+    initial_edges: int = 4
+    levels: int = 7
+    refine: bool = True
+    normal_uncertainty: float = 0.0
+    max_rounds: int = 200
+    motion_bound: float = 20.0  # tangential motion bound, times the force bound B
+
+    @classmethod
+    def pop(cls, options: dict[str, Any]) -> _Opts:
+        got = {k: options.pop(k) for k in list(options) if k in _REF_OPTIONS}
+        o = cls(**got)
+        if o.initial_edges not in (4, 8):
+            raise GraspError(f"initial_edges must be 4 or 8, got {o.initial_edges!r}")
+        if not isinstance(o.levels, int | np.integer) or not 0 <= o.levels <= 12:
+            raise GraspError(f"levels (q) must be an integer in [0, 12], got {o.levels!r}")
+        eta = float(o.normal_uncertainty)
+        if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
+            raise GraspError(
+                f"normal_uncertainty must be an angle in [0, pi/2) rad, got {o.normal_uncertainty!r}"
+            )
+        o.normal_uncertainty = eta
+        if not isinstance(o.max_rounds, int | np.integer) or o.max_rounds < 1:
+            raise GraspError(f"max_rounds must be a positive integer, got {o.max_rounds!r}")
+        if not (math.isfinite(float(o.motion_bound)) and float(o.motion_bound) >= 1.0):
+            raise GraspError(f"motion_bound must be a finite number >= 1, got {o.motion_bound!r}")
+        o.refine = bool(o.refine)
+        return o
+
+    @property
+    def gamma(self) -> float:
+        return TWO_PI / self.initial_edges
+
+    @property
+    def equivalent_edges(self) -> int:
+        return self.initial_edges * 2**self.levels
+
+
+class _Relaxation:
+    """The exact model of ch. 5 with the friction relaxation of :class:`EdgeSet` s."""
+
+    def __init__(
+        self,
+        grasp: Grasp,
+        data: _Data,
+        bounds: ExactBounds,
+        edges: list[EdgeSet],
+        eta: float,
+        motion_bound: float,
+    ) -> None:
+        self.grasp, self.edges = grasp, edges
+        prob = ExactProblem(grasp, data.preload, data.hand, bounds, friction=False,
+                            name="refinement", command_range=data.command_range)  # fmt: skip
+        self.prob = prob
+        M, B = prob.model, bounds.force
+        lmax = max(es.length(s) for es in edges for s in range(len(es)))
+        for i in range(grasp.m):  # friction up to the outer polygon: widen c_t's bounds
+            for j in prob.c[i, 1:]:
+                M.lb[j], M.ub[j] = -grasp.mu[i] * B * lmax, grasp.mu[i] * B * lmax
+        if data.max_normal_force is not None:
+            for j in prob.c[:, 0]:
+                M.ub[j] = min(M.ub[j], data.max_normal_force)
+        A = motion_bound * 2.0 * B
+        self.A = A
+        Gt = prob.G.T.reshape(grasp.m, 3, -1)
+        Jt = None if prob.J is None else prob.J.reshape(grasp.m, 3, -1)
+        self.alpha: list[NDArray[np.int64]] = []
+        self.beta: list[NDArray[np.int64]] = []
+        self.w = M.add_vars(grasp.m, 0, 1, "B", "w")
+        for i, es in enumerate(edges):
+            k, mu = len(es), float(grasp.mu[i])
+            lens = np.array([es.length(s) for s in range(k)])
+            dirs = np.array([[math.cos(t), math.sin(t)] for t in es.theta])
+            beta = M.add_vars(k, 0.0, mu * B, "C", f"beta{i}")
+            alpha = M.add_vars(k, 0.0, A, "C", f"alpha{i}")
+            z = M.add_vars(k + 1, 0.0, 1.0, "C", f"z{i}")
+            M.add_sos2(z, name=f"sector{i}")
+            # sum z = 1: the chosen sector carries all of z (a big-M answer's polish LP,
+            # MipModel.fixed, keeps the pair with the most z)
+            M.add_row(z, np.ones(k + 1), 1.0, 1.0, f"sector{i}.sum")
+            for s in range(k):  # beta_s, alpha_s <= bound * (z_s [+ z_{K+1} for s = 0])
+                zs = [int(z[s])] + ([int(z[k])] if s == 0 else [])
+                M.add_row([beta[s], *zs], [1.0] + [-mu * B] * len(zs), -INF, 0.0)
+                M.add_row([alpha[s], *zs], [1.0] + [-A] * len(zs), -INF, 0.0)
+            for t in range(2):
+                # c_t = sum beta_s l_s e_s
+                coef = lens * dirs[:, t]
+                M.add_row([int(prob.c[i, 1 + t]), *beta], [1.0, *(-coef)], 0.0, 0.0)
+                # sum alpha_s l_s e_s + d_t = 0,  d_t = G_t^T r - J_t q
+                idx, val = list(alpha), list(coef)
+                idx, val = prob._extend(idx, val, prob.r, Gt[i, 1 + t])
+                if Jt is not None:
+                    idx, val = prob._extend(idx, val, prob.q, -Jt[i, 1 + t])
+                M.add_row(idx, val, 0.0, 0.0, f"slide{i}.{t}")
+            cn = int(prob.c[i, 0])
+            M.add_row([*beta, cn], [1.0] * k + [-mu], -INF, 0.0, f"outer{i}")
+            M.add_indicator(self.w[i], alpha, np.ones(k), "<=", 0.0, 0, f"stick{i}")
+            M.add_indicator(self.w[i], [*beta, cn], [*lens, -mu], ">=", 0.0, 1, f"slip{i}")
+            self.alpha.append(alpha)
+            self.beta.append(beta)
+        if eta > 0.0:  # d_n' = d_n cos(eta) - sin(eta) sum alpha (eq. uncertainty)
+            from .mip.model import Row
+
+            for i, r in enumerate(prob.spring_rows):
+                row = M.rows[r]
+                cols = set(prob.r.tolist()) | (set() if prob.q is None else set(prob.q.tolist()))
+                val = np.array([v * math.cos(eta) if j in cols else v
+                                for j, v in zip(row.idx, row.val, strict=True)])  # fmt: skip
+                idx = np.r_[row.idx, self.alpha[i]]
+                val = np.r_[val, np.full(len(self.alpha[i]), -math.sin(eta))]
+                M.rows[r] = Row(idx.astype(np.int64), val, row.lo, row.hi, row.name)
+
+    def refine(self, pt: ExactPoint, tol: float = 1e-9) -> int:
+        """Halve the sectors the answer ``pt`` needs finer (see the module docstring); the
+        number of sectors halved."""
+        g, x = self.grasp, pt.x
+        scale = 1.0 + float(np.abs(pt.forces).max(initial=0.0))
+        n = 0
+        for i, es in enumerate(self.edges):
+            lens = np.array([es.length(s) for s in range(len(es))])
+            dirs = np.array([[math.cos(t), math.sin(t)] for t in es.theta])
+            mdt = (x[self.alpha[i]] * lens) @ dirs  # -d_t
+            ct = pt.forces[i, 1:]
+            cn = pt.forces[i, 0]
+            want = []
+            slides = np.linalg.norm(mdt) > tol * (1.0 + float(np.abs(pt.motion).max(initial=0.0)))
+            outside = np.linalg.norm(ct) > g.mu[i] * cn * (1.0 + 1e-9) + tol * scale
+            if slides:
+                want.append(mdt)
+            if (slides or outside) and np.linalg.norm(ct) > tol * scale:
+                want.append(ct)
+            todo: set[float] = set()
+            for v in want:
+                phi = math.atan2(v[1], v[0]) % TWO_PI
+                for j in es.sectors_at(phi):
+                    if es.width(j) > es.finest_width() * (1 + 1e-9):
+                        todo.add(es.theta[j])
+            for th in sorted(todo):  # by start angle: indices shift as edges are inserted
+                j = next(j for j in range(len(es)) if es.theta[j] == th and es.width(j) > 0)
+                n += int(es.refine(j))
+        return n
+
+    def cone_excess(self, pt: ExactPoint) -> float:
+        """Largest ``(|c_t| - mu c_n) / (mu c_n)`` over the closed contacts (0 inside)."""
+        c = pt.forces
+        lim = self.grasp.mu * c[:, 0]
+        ex = np.where(lim > 0, (np.linalg.norm(c[:, 1:], axis=1) - lim) / np.where(lim > 0, lim, 1),
+                      0.0)  # fmt: skip
+        return float(max(0.0, ex.max(initial=0.0)))
+
+
+@dataclass
+class _Data:
+    """A validated query: the QueryData fields plus the OptimalCommands ones."""
+
+    wrench: NDArray[np.float64] | None
+    direction: NDArray[np.float64] | None
+    cap: float
+    preload: NDArray[np.float64]
+    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+    command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    objective: str | None = None
+    weights: NDArray[np.float64] | None = None
+    max_normal_force: float | None = None
+
+    @property
+    def wrench_max(self) -> NDArray[np.float64]:
+        return self.wrench if self.direction is None else self.cap * self.direction
+
+    @classmethod
+    def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> _Data:
+        if not isinstance(query, OptimalCommands):
+            d = QueryData.of(grasp, query)
+            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand)
+        if grasp.J is None:
+            raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
+        wrench = grasp.wrench(query.wrench)
+        preload = grasp.per_contact(query.preload, "preload")
+        R, _ = hand_data(grasp, None)
+        a = R.shape[1]
+        lower = _per_actuator(query.lower, a, "lower", 0.0)
+        if np.any(lower < 0):
+            raise GraspError(f"OptimalCommands lower must be >= 0, got {lower}")
+        if query.upper is None:  # a bound from the wrench's own scale
+            b = scale_bounds(grasp, wrench, preload, (R, np.zeros(a)), bound_factor)
+            upper = np.maximum(b.excess, lower)
+        else:
+            upper = _per_actuator(query.upper, a, "upper", 0.0)
+        if np.any(upper < lower):
+            raise GraspError(f"OptimalCommands upper {upper} below lower {lower}")
+        if query.objective not in ("max", "weighted"):
+            raise GraspError(
+                f"OptimalCommands objective must be 'max' or 'weighted', got {query.objective!r}"
+            )
+        weights = _per_actuator(query.weights, a, "weights", 1.0)
+        if np.any(weights < 0):
+            raise GraspError(f"OptimalCommands weights must be >= 0, got {weights}")
+        nmax = query.max_normal_force
+        if nmax is not None:
+            nmax = float(nmax)
+            if not (math.isfinite(nmax) and nmax > 0):
+                raise GraspError(f"max_normal_force must be finite and > 0 N, got {nmax!r}")
+        scale_cmd = upper if query.upper is not None else np.zeros(a)  # for scale_bounds only
+        return cls(wrench, None, 0.0, preload, (R, scale_cmd), (lower, upper), query.objective,
+                   weights, nmax)  # fmt: skip
+
+
+def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
+    if v is None:
+        return np.full(a, default)
+    try:
+        arr = np.array(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GraspError(f"OptimalCommands {name} must be numeric, got {v!r}") from exc
+    if arr.ndim == 0:
+        arr = np.full(a, float(arr))
+    if arr.shape != (a,) or not np.all(np.isfinite(arr)):
+        raise GraspError(f"OptimalCommands {name} must be {a} finite numbers, got {v!r}")
+    return arr
+
+
+def _round(
+    grasp: Grasp, data: _Data, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
+    opts: MipOptions, stats: dict[str, Any],
+) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
+    """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
+    ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands)."""
+    rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
+    prob, M = rel.prob, rel.prob.model
+    var = None
+    if data.direction is not None:
+        var = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
+        M.set_objective([var], [1.0], maximize=True)
+    else:
+        prob.add_object_equilibrium(data.wrench)
+        if data.command_range is not None:
+            fc = prob.fc
+            if data.objective == "max":
+                var = M.add_var(0.0, float(data.command_range[1].max()), "C", "max_command")
+                for j in fc:  # t >= f_c,j
+                    M.add_row([var, int(j)], [1.0, -1.0], 0.0, INF)
+                M.set_objective([var], [1.0])
+            else:
+                var = -1
+                M.set_objective(fc, data.weights)
+    pt = run(prob, opts, stats)
+    return rel, pt, var
+
+
+def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
+    ro = _Opts.pop(options)
+    opts = MipOptions.of(method, options)
+    data = _Data.of(grasp, query, opts.bound_factor)
+    bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
+    stats: dict[str, Any] = {"backend": opts.backend, "initial_edges": ro.initial_edges,
+                             "levels": ro.levels, "equivalent_edges": ro.equivalent_edges,
+                             "normal_uncertainty": ro.normal_uncertainty}  # fmt: skip
+    bounds_stats(bounds, stats)
+    g, q = ro.gamma, ro.levels
+    if ro.refine:
+        edges = [EdgeSet.uniform(ro.initial_edges, 1, g, q) for _ in range(grasp.m)]
+    else:
+        edges = [EdgeSet.uniform(ro.equivalent_edges, q + 1, g, q) for _ in range(grasp.m)]
+    conditions = tuple(c for c in CONDITIONS if c != "friction_cone")
+    if ro.normal_uncertainty > 0:
+        conditions = tuple(c for c in conditions if c != "spring_law")
+    trace: list[dict[str, Any]] = []
+    stats["rounds"] = trace
+    cap0 = data.cap
+    try:
+        for _ in range(ro.max_rounds):
+            rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats)
+            row: dict[str, Any] = {"edges": [len(e) for e in edges], "feasible": pt is not None}
+            trace.append(row)
+            if pt is None:
+                stats["reason"] = (f"infeasible with {max(len(e) for e in edges)} edges per "
+                                   "contact: no equilibrium at any finer level either")  # fmt: skip
+                if data.direction is not None:
+                    stats["capped"] = False
+                return solution(method, grasp, query, False, stats, conditions=conditions)
+            row["value"] = _value(rel, pt, var, data)
+            if data.direction is not None and row["value"] < data.cap:
+                # no finer level can do better (containment): tighten the cap, and with it
+                # the model's bounds (big-M), to this level's answer
+                data.cap = min(data.cap, row["value"] * (1 + 1e-6) + 1e-12 * cap0)
+                bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
+                                      opts.bound_factor)  # fmt: skip
+                bounds_stats(bounds, stats)
+            n = rel.refine(pt) if ro.refine else 0
+            row["refined"] = n
+            if n == 0:
+                break
+        else:
+            stats["reason"] = f"max_rounds {ro.max_rounds} reached before the finest level"
+            return solution(method, grasp, query, None, stats, status="not_converged",
+                            conditions=conditions)  # fmt: skip
+    except Stop as e:
+        return stopped(method, grasp, query, stats, e)
+    stats["cone_excess"] = rel.cone_excess(pt)
+    stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
+    stats["mip_rounds"] = len(trace)
+    value = _value(rel, pt, var, data)
+    if data.direction is not None:
+        stats["capped"] = value >= cap0 * (1 - 1e-8)
+    sol = solution(method, grasp, query, True, stats, rel.prob, pt, value, conditions=conditions)
+    if data.command_range is not None:
+        sol.commands = pt.x[rel.prob.fc]
+        stats["at_bound"] = stats.get("at_bound") or bool(
+            np.any(sol.commands >= 0.99 * data.command_range[1])
+            and query.upper is None
+        )
+    return sol
+
+
+def _value(rel: _Relaxation, pt: ExactPoint, var: int | None, data: _Data) -> float | None:
+    if var is None:
+        return None
+    if data.direction is not None:
+        return float(min(data.cap, max(0.0, pt.x[var])))
+    if var == -1:
+        return float(data.weights @ pt.x[rel.prob.fc])
+    return float(pt.x[rel.prob.fc].max(initial=0.0))
+
+
+@register(
+    "refinement",
+    queries=(Existence, MaxDisturbance, OptimalCommands),
+    planar=False,
+    spatial=True,
+    hand=True,
+    summary="thesis ch. 6: Coulomb friction with maximum dissipation, hierarchical refinement "
+    "of a convex relaxation (infeasible at any level = unstable)",
+)
+def _solve_refinement(grasp: Grasp, query: Any, **options: Any) -> Solution:
+    return _solve(grasp, query, "refinement", **options)
