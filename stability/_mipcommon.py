@@ -27,7 +27,7 @@ CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND
 # Measured by ``python -m stability.bench mip`` (README, docs/bench/mip.csv): over its 12
 # (case, query) medians SCIP/HiGHS is 1.17 (geometric mean) for no_mdp's one MIP per query
 # and 0.84 for iterative's many small ones; both gave the same answers.
-DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip"}
+DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip", "refinement": "scip"}
 
 
 def default_backend(method: str) -> str:

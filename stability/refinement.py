@@ -26,7 +26,9 @@ so the outer polygon of a sector contains those of its two halves (the bisecting
 length ``l_{p+1}`` ends on the parent's outer side) and the chords of the halves lie
 outside the parent's chord: every relaxation contains every finer one and, at every level,
 the exact cone with maximum dissipation. Hence **infeasible at any level means unstable**
-(reported at once), and an optimum never improves with refinement. At level ``q + 1``
+(reported at once), and an optimum never improves with refinement. (Relaxations built for
+different ``q`` are not nested: the uniform tangent polygon of 16 edges sticks out of that
+of 8 edges at the latter's tangent points, by ``sec(pi / 16) - 1``.) At level ``q + 1``
 (angle ``gamma / 2^q``) the outer sides are tangent to the cone (``l_{q+1} = sec(gamma /
 2^(q+1))``).
 
@@ -36,7 +38,8 @@ where the answer needs it: the sector of a sliding contact's motion and friction
 a sticking contact's friction when it lies outside the exact cone (``|c_t| > mu c_n``).
 Refinement stops when no such sector is coarser than ``gamma / 2^q``. The answer then
 satisfies the relaxation at uniform resolution ``K0 2^q`` (``refine=False`` solves that
-one MIP from the start: the thesis' "full resolution"), with friction at most
+one MIP from the start: the thesis' "full resolution"; ``start_level=p`` starts from the
+uniform level-``p`` relaxation, all of them nested for one ``q``), with friction at most
 ``l_{q+1} - 1`` times ``mu c_n`` outside the cone (``stats["cone_excess"]``).
 
 Robustness to contact-normal error ``eta`` (``normal_uncertainty``, radians; sec. robust,
@@ -85,7 +88,7 @@ from .solution import Solution
 __all__ = ["EdgeSet", "edge_length"]
 
 _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
-                "motion_bound")  # fmt: skip
+                "motion_bound", "start_level")  # fmt: skip
 TWO_PI = 2.0 * math.pi
 
 
@@ -191,7 +194,9 @@ class _Opts:
     refine: bool = True
     normal_uncertainty: float = 0.0
     max_rounds: int = 200
-    motion_bound: float = 20.0  # tangential motion bound, times the force bound B
+    motion_bound: float = 4.0  # tangential motion bound per edge weight, times 2 B
+    start_level: int | None = None  # uniform edges of this level first (default 1; q + 1
+    # without refinement)
 
     @classmethod
     def pop(cls, options: dict[str, Any]) -> _Opts:
@@ -204,7 +209,7 @@ class _Opts:
         eta = float(o.normal_uncertainty)
         if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
             raise GraspError(
-                f"normal_uncertainty must be an angle in [0, pi/2) rad, got {o.normal_uncertainty!r}"
+                f"normal_uncertainty must be in [0, pi/2) rad, got {o.normal_uncertainty!r}"
             )
         o.normal_uncertainty = eta
         if not isinstance(o.max_rounds, int | np.integer) or o.max_rounds < 1:
@@ -212,6 +217,15 @@ class _Opts:
         if not (math.isfinite(float(o.motion_bound)) and float(o.motion_bound) >= 1.0):
             raise GraspError(f"motion_bound must be a finite number >= 1, got {o.motion_bound!r}")
         o.refine = bool(o.refine)
+        if o.start_level is None:
+            o.start_level = 1 if o.refine else o.levels + 1
+        if (
+            not isinstance(o.start_level, int | np.integer)
+            or not 1 <= o.start_level <= o.levels + 1
+        ):
+            raise GraspError(
+                f"start_level must be an integer in [1, levels + 1], got {o.start_level!r}"
+            )
         return o
 
     @property
@@ -235,7 +249,7 @@ class _Relaxation:
         eta: float,
         motion_bound: float,
     ) -> None:
-        self.grasp, self.edges = grasp, edges
+        self.grasp, self.edges, self.eta = grasp, edges, eta
         prob = ExactProblem(grasp, data.preload, data.hand, bounds, friction=False,
                             name="refinement", command_range=data.command_range)  # fmt: skip
         self.prob = prob
@@ -285,7 +299,7 @@ class _Relaxation:
             M.add_indicator(self.w[i], [*beta, cn], [*lens, -mu], ">=", 0.0, 1, f"slip{i}")
             self.alpha.append(alpha)
             self.beta.append(beta)
-        if eta > 0.0:  # d_n' = d_n cos(eta) - sin(eta) sum alpha (eq. uncertainty)
+        if eta > 0.0:  # d_n' = d_n cos(eta) + sin(eta) sum alpha (eq. uncertainty, unloading)
             from .mip.model import Row
 
             for i, r in enumerate(prob.spring_rows):
@@ -294,7 +308,7 @@ class _Relaxation:
                 val = np.array([v * math.cos(eta) if j in cols else v
                                 for j, v in zip(row.idx, row.val, strict=True)])  # fmt: skip
                 idx = np.r_[row.idx, self.alpha[i]]
-                val = np.r_[val, np.full(len(self.alpha[i]), -math.sin(eta))]
+                val = np.r_[val, np.full(len(self.alpha[i]), math.sin(eta))]
                 M.rows[r] = Row(idx.astype(np.int64), val, row.lo, row.hi, row.name)
 
     def refine(self, pt: ExactPoint, tol: float = 1e-9) -> int:
@@ -312,7 +326,7 @@ class _Relaxation:
             want = []
             slides = np.linalg.norm(mdt) > tol * (1.0 + float(np.abs(pt.motion).max(initial=0.0)))
             outside = np.linalg.norm(ct) > g.mu[i] * cn * (1.0 + 1e-9) + tol * scale
-            if slides:
+            if slides and (pt.closed[i] or self.eta > 0):  # an open contact's slide is free
                 want.append(mdt)
             if (slides or outside) and np.linalg.norm(ct) > tol * scale:
                 want.append(ct)
@@ -444,10 +458,8 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                              "normal_uncertainty": ro.normal_uncertainty}  # fmt: skip
     bounds_stats(bounds, stats)
     g, q = ro.gamma, ro.levels
-    if ro.refine:
-        edges = [EdgeSet.uniform(ro.initial_edges, 1, g, q) for _ in range(grasp.m)]
-    else:
-        edges = [EdgeSet.uniform(ro.equivalent_edges, q + 1, g, q) for _ in range(grasp.m)]
+    k0 = ro.initial_edges * 2 ** (ro.start_level - 1)
+    edges = [EdgeSet.uniform(k0, ro.start_level, g, q) for _ in range(grasp.m)]
     conditions = tuple(c for c in CONDITIONS if c != "friction_cone")
     if ro.normal_uncertainty > 0:
         conditions = tuple(c for c in conditions if c != "spring_law")
@@ -493,8 +505,7 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     if data.command_range is not None:
         sol.commands = pt.x[rel.prob.fc]
         stats["at_bound"] = stats.get("at_bound") or bool(
-            np.any(sol.commands >= 0.99 * data.command_range[1])
-            and query.upper is None
+            np.any(sol.commands >= 0.99 * data.command_range[1]) and query.upper is None
         )
     return sol
 

@@ -171,6 +171,15 @@ def _polish(model: MipModel, res: MipResult) -> None:
     if lp["status"] != "optimal" or lp["x"] is None or res.objective is None:
         return
     # The fixed LP's point satisfies the exact conditions; its objective can be a little
-    # worse than the big-M answer's, which a trickle flow may have flattered.
-    res.x, res.objective = lp["x"], lp["objective"]
+    # worse than the big-M answer's, which a trickle flow may have flattered. A point much
+    # worse is a different answer (the trickle decided which integers the LP fixed, e.g. a
+    # 6e-7 slide under a "no slide" indicator): then the solver's own point is kept, and the
+    # caller's check of the exact conditions decides.
+    new = float(lp["objective"])
+    old = float(res.objective)
+    worse = (old - new) if model.maximize else (new - old)
+    if worse > 1e-6 * (1.0 + abs(old)):
+        res.message += f" (polish rejected: objective {new:.9g} vs {old:.9g})"
+        return
+    res.x, res.objective = lp["x"], new
     res.message += " (polished)"
