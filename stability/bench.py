@@ -1,5 +1,6 @@
-"""Benchmarks: ``python -m stability.bench planar`` and ``python -m stability.bench mip``
-(:mod:`stability.bench_mip`).
+"""Benchmarks: ``python -m stability.bench planar``, ``python -m stability.bench mip``
+(:mod:`stability.bench_mip`) and ``python -m stability.bench refinement``
+(:mod:`stability.bench_refinement`).
 
 ``planar`` reproduces the thesis' Table tab:performance (number of slip states
 and enumeration time for m = 2..9 random contacts) side by side with our
@@ -201,12 +202,23 @@ def print_table(rows: list[dict]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m stability.bench", description=__doc__)
-    ap.add_argument("which", choices=["planar", "mip"], help="benchmark to run")
+    ap.add_argument("which", choices=["planar", "mip", "refinement"], help="benchmark to run")
+    ap.add_argument("--max-levels", type=int, default=9,
+                    help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
+    ap.add_argument("--time-limit", type=float, default=120.0,
+                    help="refinement: seconds per solve")  # fmt: skip
     ap.add_argument("--out", default="bench_out", help="folder for the CSV and PNG")
     ap.add_argument("--repeats", type=int, default=None,
                     help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
+    if args.which == "refinement":
+        from .bench_refinement import bench_refinement, write_refinement
+
+        rows = bench_refinement(args.max_levels, args.time_limit)
+        csv_path, png = write_refinement(rows, Path(args.out))
+        print(f"wrote {csv_path} and {png}")
+        return
     if args.which == "mip":
         from .bench_mip import bench_mip, print_mip_table, write_mip
 
