@@ -48,8 +48,8 @@ from .errors import GraspError
 from .grasp import Grasp
 from .mip import INF, MipModel
 
-__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "hand_data", "length_scale",
-           "scale_bounds"]  # fmt: skip
+__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "hand_data",
+           "length_scale", "scale_bounds"]  # fmt: skip
 
 
 def length_scale(grasp: Grasp) -> float:
@@ -75,17 +75,27 @@ def hand_data(
     a = R.shape[1]
     if commands is None:
         return R, np.zeros(a)
+    return R, actuator_vector(commands, a, "commands")
+
+
+def actuator_vector(
+    value: ArrayLike | None, a: int, name: str, default: float = 0.0
+) -> NDArray[np.float64]:
+    """One finite number per actuator (a scalar is broadcast; None gives ``default``);
+    GraspError naming ``name`` otherwise."""
+    if value is None:
+        return np.full(a, float(default))
     try:
-        fc = np.array(commands, dtype=float)
+        arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise GraspError(f"commands must be numeric, got {commands!r}") from exc
-    if fc.ndim == 0:
-        fc = np.full(a, float(fc))
-    if fc.shape != (a,):
-        raise GraspError(f"commands must have shape ({a},) for {a} actuators, got {fc.shape}")
-    if not np.all(np.isfinite(fc)):
-        raise GraspError("commands contain NaN or inf")
-    return R, fc
+        raise GraspError(f"{name} must be numeric, got {value!r}") from exc
+    if arr.ndim == 0:
+        arr = np.full(a, float(arr))
+    if arr.shape != (a,):
+        raise GraspError(f"{name} must have shape ({a},) for {a} actuators, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise GraspError(f"{name} contain NaN or inf")
+    return arr
 
 
 @dataclass(frozen=True)

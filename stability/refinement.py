@@ -79,7 +79,14 @@ from ._mipcommon import (
 )
 from .api import register
 from .errors import GraspError
-from .exact import ExactBounds, ExactPoint, ExactProblem, hand_data, scale_bounds
+from .exact import (
+    ExactBounds,
+    ExactPoint,
+    ExactProblem,
+    actuator_vector,
+    hand_data,
+    scale_bounds,
+)
 from .grasp import Grasp
 from .mip import INF
 from .queries import Existence, MaxDisturbance, OptimalCommands
@@ -407,17 +414,7 @@ class _Data:
 
 
 def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
-    if v is None:
-        return np.full(a, default)
-    try:
-        arr = np.array(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GraspError(f"OptimalCommands {name} must be numeric, got {v!r}") from exc
-    if arr.ndim == 0:
-        arr = np.full(a, float(arr))
-    if arr.shape != (a,) or not np.all(np.isfinite(arr)):
-        raise GraspError(f"OptimalCommands {name} must be {a} finite numbers, got {v!r}")
-    return arr
+    return actuator_vector(v, a, f"OptimalCommands {name}", default)
 
 
 def _round(

@@ -302,3 +302,19 @@ def test_default_spatial_method_and_bad_options() -> None:
             solve(g, Existence(Z, commands=[0.1, 0.1]), method="refinement", **bad)
     t = solve(g, Existence(Z, commands=[0.1, 0.1]), method="refinement", time_limit=0)
     assert t.status == "timeout" and t.stable is None
+
+
+def test_where_methods_fail_one_sector_and_no_mdp_over_predict() -> None:
+    """The tendon finger pushed along +y: with 4 edges (one 90 deg sector for friction and
+    slide together) the relaxation "holds" the cap of 100 N, about 29x the converged 3.46 N
+    (the thesis' >100 N at 4 edges); no_mdp, with no dissipation at all, also holds 100 N.
+    The converged value agrees with iterative (1 %) and its solution's residuals vanish."""
+    g = examples.tendon_finger()
+    d = [0, 1, 0, 0, 0, 0]
+    coarse = _max(g, d, commands=examples.TENDON_FORCE, levels=0)
+    fine = _max(g, d, commands=examples.TENDON_FORCE)
+    _check(fine)
+    assert coarse.stats["capped"] and coarse.value >= 20 * fine.value
+    q = MaxDisturbance(d, commands=examples.TENDON_FORCE, cap=100.0)
+    assert solve(g, q, method="no_mdp").value >= 20 * fine.value
+    assert fine.value == pytest.approx(solve(g, q, method="iterative").value, rel=0.01)
