@@ -347,20 +347,23 @@ class ExactProblem:
 
     # ------------------------------------------------------------------ answers
 
-    def tidy(self, x: NDArray[np.float64], rtol: float = 1e-10) -> NDArray[np.float64] | None:
+    def tidy(
+        self, x: NDArray[np.float64], rtol: float = 1e-10, lp: MipModel | None = None
+    ) -> NDArray[np.float64] | None:
         """The least-motion point with ``x``'s binaries and objective value: the LP of
         :meth:`MipModel.fixed` plus ``objective within rtol of x's``, minimising the weighted
         1-norm of the virtual motion (translations, rotations times ``L``, joint motions
         times their lever ``|J_j|``: all in contact-displacement units). Motions that load no
         spring are otherwise arbitrary, and a simplex vertex can put them anywhere. None if
-        the LP fails (the caller keeps ``x``)."""
+        the LP fails (the caller keeps ``x``). ``lp``: a fixed LP of this model's variables
+        to use instead (e.g. with more rows: ``spatial`` fixes slide directions), copied."""
         from .mip import solve as mip_solve
 
-        lp = self.model.fixed(x)
+        lp = self.model.fixed(x) if lp is None else lp.fixed(x)
         obj = self.model.objective
         nz = np.flatnonzero(obj)
         if nz.size:
-            val = float(obj @ x)
+            val = float(obj @ x[: obj.size])
             slack = rtol * max(1.0, abs(val))
             if self.model.maximize:
                 lp.add_row(nz, obj[nz], val - slack, INF, "objective")

@@ -424,7 +424,16 @@ def _round(
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
     ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands)."""
     rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
-    prob, M = rel.prob, rel.prob.model
+    var = add_query(rel.prob, data)
+    pt = run(rel.prob, opts, stats)
+    return rel, pt, var
+
+
+def add_query(prob: ExactProblem, data: _Data) -> int | None:
+    """Object equilibrium and the query's objective on ``prob``: the index of ``s``
+    (MaxDisturbance), of the largest command (OptimalCommands "max"), -1 (OptimalCommands
+    "weighted": the objective is ``weights . f_c``) or None (Existence)."""
+    M = prob.model
     var = None
     if data.direction is not None:
         var = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
@@ -441,8 +450,7 @@ def _round(
             else:
                 var = -1
                 M.set_objective(fc, data.weights)
-    pt = run(prob, opts, stats)
-    return rel, pt, var
+    return var
 
 
 def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:

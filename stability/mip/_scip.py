@@ -10,7 +10,7 @@ import numpy as np
 
 from .model import MipModel
 
-__all__ = ["solve_scip"]
+__all__ = ["build_scip", "optimize_scip", "solve_scip"]
 
 _VTYPE = {"C": "C", "B": "B", "I": "I"}
 
@@ -23,9 +23,19 @@ def solve_scip(
     model: MipModel, time_limit: float | None, verbose: bool, gap: float
 ) -> dict[str, Any]:
     """Solve with SCIP; returns the raw fields of a :class:`~stability.mip.MipResult`."""
+    t0 = time.perf_counter()
+    m, x = build_scip(model, time_limit, verbose, gap)
+    return optimize_scip(m, x, model, t0)
+
+
+def build_scip(
+    model: MipModel, time_limit: float | None, verbose: bool, gap: float
+) -> tuple[Any, list[Any]]:
+    """``model`` as a ``pyscipopt.Model`` and its variables (in ``model``'s order), not yet
+    solved: a caller may add SCIP's own (e.g. nonlinear) constraints before
+    :func:`optimize_scip`."""
     import pyscipopt as scip  # imported here: a missing backend is reported by solve()
 
-    t0 = time.perf_counter()
     m = scip.Model(model.name)
     if not verbose:
         m.hideOutput()
@@ -73,6 +83,12 @@ def solve_scip(
                           name=s.name)  # fmt: skip
     obj = expr(np.flatnonzero(model.objective), model.objective[model.objective != 0])
     m.setObjective(obj + model.offset, sense="maximize" if model.maximize else "minimize")
+    return m, x
+
+
+def optimize_scip(m: Any, x: list[Any], model: MipModel, t0: float) -> dict[str, Any]:
+    """Solve a model from :func:`build_scip`; the raw fields of a
+    :class:`~stability.mip.MipResult` (``time_s`` counted from ``t0``)."""
     m.optimize()
     status = m.getStatus()
     name = {
