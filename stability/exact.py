@@ -281,6 +281,7 @@ class ExactProblem:
                 else:
                     M.add_indicator(self.z[a], [self.f[a], self.fc[a]], [1.0, -1.0], "<=", 0.0,
                                     0, f"moving{a}")  # fmt: skip
+        self.n_base = M.n_vars  # the variables above, the same for the same arguments
 
     @staticmethod
     def _extend(idx, val, var, coef) -> tuple[list, list]:

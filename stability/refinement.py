@@ -67,10 +67,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._exactmdp import QueryModel, add_query, certify, query_value
 from ._mipcommon import (
     CONDITIONS,
     MipOptions,
-    QueryData,
     Stop,
     bounds_stats,
     run,
@@ -83,8 +83,6 @@ from .exact import (
     ExactBounds,
     ExactPoint,
     ExactProblem,
-    actuator_vector,
-    hand_data,
     scale_bounds,
 )
 from .grasp import Grasp
@@ -95,7 +93,7 @@ from .solution import Solution
 __all__ = ["EdgeSet", "edge_length"]
 
 _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
-                "motion_bound", "start_level")  # fmt: skip
+                "motion_bound", "start_level", "certify", "certify_gap")  # fmt: skip
 TWO_PI = 2.0 * math.pi
 
 
@@ -204,6 +202,8 @@ class _Opts:
     motion_bound: float = 4.0  # tangential motion bound per edge weight, times 2 B
     start_level: int | None = None  # uniform edges of this level first (default 1; q + 1
     # without refinement)
+    certify: bool = True  # try each round's answer as an exact solution (certify)
+    certify_gap: float = 1e-6  # stop when the certified value meets the relaxation's
 
     @classmethod
     def pop(cls, options: dict[str, Any]) -> _Opts:
@@ -224,6 +224,11 @@ class _Opts:
         if not (math.isfinite(float(o.motion_bound)) and float(o.motion_bound) >= 1.0):
             raise GraspError(f"motion_bound must be a finite number >= 1, got {o.motion_bound!r}")
         o.refine = bool(o.refine)
+        o.certify = bool(o.certify)
+        gap = float(o.certify_gap)
+        if not (math.isfinite(gap) and 0.0 <= gap < 1.0):
+            raise GraspError(f"certify_gap must be in [0, 1), got {o.certify_gap!r}")
+        o.certify_gap = gap
         if o.start_level is None:
             o.start_level = 1 if o.refine else o.levels + 1
         if (
@@ -250,7 +255,7 @@ class _Relaxation:
     def __init__(
         self,
         grasp: Grasp,
-        data: _Data,
+        data: QueryModel,
         bounds: ExactBounds,
         edges: list[EdgeSet],
         eta: float,
@@ -357,68 +362,8 @@ class _Relaxation:
         return float(max(0.0, ex.max(initial=0.0)))
 
 
-@dataclass
-class _Data:
-    """A validated query: the QueryData fields plus the OptimalCommands ones."""
-
-    wrench: NDArray[np.float64] | None
-    direction: NDArray[np.float64] | None
-    cap: float
-    preload: NDArray[np.float64]
-    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
-    command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
-    objective: str | None = None
-    weights: NDArray[np.float64] | None = None
-    max_normal_force: float | None = None
-
-    @property
-    def wrench_max(self) -> NDArray[np.float64]:
-        return self.wrench if self.direction is None else self.cap * self.direction
-
-    @classmethod
-    def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> _Data:
-        if not isinstance(query, OptimalCommands):
-            d = QueryData.of(grasp, query)
-            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand)
-        if grasp.J is None:
-            raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
-        wrench = grasp.wrench(query.wrench)
-        preload = grasp.per_contact(query.preload, "preload")
-        R, _ = hand_data(grasp, None)
-        a = R.shape[1]
-        lower = _per_actuator(query.lower, a, "lower", 0.0)
-        if np.any(lower < 0):
-            raise GraspError(f"OptimalCommands lower must be >= 0, got {lower}")
-        if query.upper is None:  # a bound from the wrench's own scale
-            b = scale_bounds(grasp, wrench, preload, (R, np.zeros(a)), bound_factor)
-            upper = np.maximum(b.excess, lower)
-        else:
-            upper = _per_actuator(query.upper, a, "upper", 0.0)
-        if np.any(upper < lower):
-            raise GraspError(f"OptimalCommands upper {upper} below lower {lower}")
-        if query.objective not in ("max", "weighted"):
-            raise GraspError(
-                f"OptimalCommands objective must be 'max' or 'weighted', got {query.objective!r}"
-            )
-        weights = _per_actuator(query.weights, a, "weights", 1.0)
-        if np.any(weights < 0):
-            raise GraspError(f"OptimalCommands weights must be >= 0, got {weights}")
-        nmax = query.max_normal_force
-        if nmax is not None:
-            nmax = float(nmax)
-            if not (math.isfinite(nmax) and nmax > 0):
-                raise GraspError(f"max_normal_force must be finite and > 0 N, got {nmax!r}")
-        scale_cmd = upper if query.upper is not None else np.zeros(a)  # for scale_bounds only
-        return cls(wrench, None, 0.0, preload, (R, scale_cmd), (lower, upper), query.objective,
-                   weights, nmax)  # fmt: skip
-
-
-def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
-    return actuator_vector(v, a, f"OptimalCommands {name}", default)
-
-
 def _round(
-    grasp: Grasp, data: _Data, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
+    grasp: Grasp, data: QueryModel, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
     opts: MipOptions, stats: dict[str, Any],
 ) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
@@ -429,34 +374,10 @@ def _round(
     return rel, pt, var
 
 
-def add_query(prob: ExactProblem, data: _Data) -> int | None:
-    """Object equilibrium and the query's objective on ``prob``: the index of ``s``
-    (MaxDisturbance), of the largest command (OptimalCommands "max"), -1 (OptimalCommands
-    "weighted": the objective is ``weights . f_c``) or None (Existence)."""
-    M = prob.model
-    var = None
-    if data.direction is not None:
-        var = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
-        M.set_objective([var], [1.0], maximize=True)
-    else:
-        prob.add_object_equilibrium(data.wrench)
-        if data.command_range is not None:
-            fc = prob.fc
-            if data.objective == "max":
-                var = M.add_var(0.0, float(data.command_range[1].max()), "C", "max_command")
-                for j in fc:  # t >= f_c,j
-                    M.add_row([var, int(j)], [1.0, -1.0], 0.0, INF)
-                M.set_objective([var], [1.0])
-            else:
-                var = -1
-                M.set_objective(fc, data.weights)
-    return var
-
-
 def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     ro = _Opts.pop(options)
     opts = MipOptions.of(method, options)
-    data = _Data.of(grasp, query, opts.bound_factor)
+    data = QueryModel.of(grasp, query, opts.bound_factor)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": opts.backend, "initial_edges": ro.initial_edges,
                              "levels": ro.levels, "equivalent_edges": ro.equivalent_edges,
@@ -471,6 +392,7 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     trace: list[dict[str, Any]] = []
     stats["rounds"] = trace
     cap0 = data.cap
+    best = None  # the best certified exact solution so far (certify)
     try:
         for _ in range(ro.max_rounds):
             rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats)
@@ -482,7 +404,7 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 if data.direction is not None:
                     stats["capped"] = False
                 return solution(method, grasp, query, False, stats, conditions=conditions)
-            row["value"] = _value(rel, pt, var, data)
+            row["value"] = query_value(rel, pt, var, data)
             if data.direction is not None and row["value"] < data.cap:
                 # no finer level can do better (containment): tighten the cap, and with it
                 # the model's bounds (big-M), to this level's answer
@@ -490,6 +412,14 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
+            if ro.certify:
+                cert = certify(grasp, data, bounds, rel.prob, pt.x, var, ro.normal_uncertainty,
+                               ro.motion_bound)  # fmt: skip
+                row["exact"] = None if cert is None else cert[2]
+                if cert is not None and (best is None or _better(cert[2], best[2], data)):
+                    best = cert
+                if best is not None and _closed(best[2], row["value"], data, ro.certify_gap):
+                    return _certified(method, grasp, query, stats, best, trace, ro, data)
             n = rel.refine(pt) if ro.refine else 0
             row["refined"] = n
             if n == 0:
@@ -503,7 +433,10 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     stats["cone_excess"] = rel.cone_excess(pt)
     stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
     stats["mip_rounds"] = len(trace)
-    value = _value(rel, pt, var, data)
+    stats["certified"] = False
+    if best is not None:
+        stats["exact_value"] = best[2]
+    value = query_value(rel, pt, var, data)
     if data.direction is not None:
         stats["capped"] = value >= cap0 * (1 - 1e-8)
     sol = solution(method, grasp, query, True, stats, rel.prob, pt, value, conditions=conditions)
@@ -515,14 +448,40 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     return sol
 
 
-def _value(rel: _Relaxation, pt: ExactPoint, var: int | None, data: _Data) -> float | None:
-    if var is None:
-        return None
+def _better(a: float | None, b: float | None, data: QueryModel) -> bool:
+    if a is None or b is None:
+        return False
+    return a > b if data.direction is not None else a < b
+
+
+def _closed(exact: float | None, relaxed: float | None, data: QueryModel, gap: float) -> bool:
+    """The certified exact value meets the relaxation's bound within ``gap`` (Existence:
+    any certificate closes)."""
+    if exact is None or relaxed is None:
+        return True
+    if data.direction is not None:  # exact <= optimum <= relaxed
+        return exact >= relaxed * (1.0 - gap) - 1e-12
+    return exact <= relaxed * (1.0 + gap) + 1e-12  # relaxed <= optimum <= exact
+
+
+def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
+               trace: list, ro: _Opts, data: QueryModel) -> Solution:  # fmt: skip
+    """The Solution of a certified exact point (module docstring, "Certificates")."""
+    ex, pt, value = best
+    stats["certified"] = True
+    stats["mip_rounds"] = len(trace)
+    stats["cone_excess"] = 0.0
+    stats["cone_excess_bound"] = edge_length(ro.levels + 1, ro.gamma, ro.levels) - 1.0
+    stats["exact_value"] = value
+    conditions = (*CONDITIONS, "max_dissipation")
+    if ro.normal_uncertainty > 0:
+        conditions = tuple(c for c in conditions if c != "spring_law")
     if data.direction is not None:
-        return float(min(data.cap, max(0.0, pt.x[var])))
-    if var == -1:
-        return float(data.weights @ pt.x[rel.prob.fc])
-    return float(pt.x[rel.prob.fc].max(initial=0.0))
+        stats["capped"] = False
+    sol = solution(method, grasp, query, True, stats, ex.prob, pt, value, conditions=conditions)
+    if data.command_range is not None:
+        sol.commands = pt.x[ex.prob.fc]
+    return sol
 
 
 @register(

@@ -1,0 +1,363 @@
+"""The exact problem with Coulomb friction and maximum dissipation, stated for any query:
+shared by ``spatial`` (solved globally by SCIP) and ``refinement`` (whose relaxed answers it
+certifies, or repairs, as exact solutions).
+
+:class:`QueryModel`: a validated query (wrench or direction and cap, preload, hand,
+OptimalCommands' command range and objective). :func:`add_query`: its object equilibrium
+and objective on an :class:`~stability.exact.ExactProblem`. :class:`ExactMdp`: the exact
+model's linear part (the tangential motions ``d_t`` and slide bounds ``s`` as variables; the
+nonlinear rows of ``spatial`` go on SCIP's model). :func:`mode_lp` / :func:`polish`: with
+each contact's mode (open, sticking, sliding along ``u``) fixed, the exact problem is one
+LP: a point of it satisfies every condition exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._mipcommon import QueryData
+from .errors import GraspError
+from .exact import (
+    ExactBounds,
+    ExactPoint,
+    ExactProblem,
+    actuator_vector,
+    hand_data,
+    length_scale,
+    scale_bounds,
+)
+from .grasp import Grasp
+from .mip import INF
+from .mip.model import Row
+from .queries import OptimalCommands
+
+__all__ = ["ExactMdp", "QueryModel", "add_query", "certify", "exact_point", "mode_lp", "polish",
+           "query_value"]  # fmt: skip
+
+
+@dataclass
+class QueryModel:
+    """A validated query: the QueryData fields plus the OptimalCommands ones."""
+
+    wrench: NDArray[np.float64] | None
+    direction: NDArray[np.float64] | None
+    cap: float
+    preload: NDArray[np.float64]
+    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+    command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    objective: str | None = None
+    weights: NDArray[np.float64] | None = None
+    max_normal_force: float | None = None
+
+    @property
+    def wrench_max(self) -> NDArray[np.float64]:
+        return self.wrench if self.direction is None else self.cap * self.direction
+
+    @classmethod
+    def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> QueryModel:
+        if not isinstance(query, OptimalCommands):
+            d = QueryData.of(grasp, query)
+            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand)
+        if grasp.J is None:
+            raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
+        wrench = grasp.wrench(query.wrench)
+        preload = grasp.per_contact(query.preload, "preload")
+        R, _ = hand_data(grasp, None)
+        a = R.shape[1]
+        lower = _per_actuator(query.lower, a, "lower", 0.0)
+        if np.any(lower < 0):
+            raise GraspError(f"OptimalCommands lower must be >= 0, got {lower}")
+        if query.upper is None:  # a bound from the wrench's own scale
+            b = scale_bounds(grasp, wrench, preload, (R, np.zeros(a)), bound_factor)
+            upper = np.maximum(b.excess, lower)
+        else:
+            upper = _per_actuator(query.upper, a, "upper", 0.0)
+        if np.any(upper < lower):
+            raise GraspError(f"OptimalCommands upper {upper} below lower {lower}")
+        if query.objective not in ("max", "weighted"):
+            raise GraspError(
+                f"OptimalCommands objective must be 'max' or 'weighted', got {query.objective!r}"
+            )
+        weights = _per_actuator(query.weights, a, "weights", 1.0)
+        if np.any(weights < 0):
+            raise GraspError(f"OptimalCommands weights must be >= 0, got {weights}")
+        nmax = query.max_normal_force
+        if nmax is not None:
+            nmax = float(nmax)
+            if not (math.isfinite(nmax) and nmax > 0):
+                raise GraspError(f"max_normal_force must be finite and > 0 N, got {nmax!r}")
+        scale_cmd = upper if query.upper is not None else np.zeros(a)  # for scale_bounds only
+        return cls(wrench, None, 0.0, preload, (R, scale_cmd), (lower, upper), query.objective,
+                   weights, nmax)  # fmt: skip
+
+
+def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
+    return actuator_vector(v, a, f"OptimalCommands {name}", default)
+
+
+def add_query(prob: ExactProblem, data: QueryModel) -> int | None:
+    """Object equilibrium and the query's objective on ``prob``: the index of ``s``
+    (MaxDisturbance), of the largest command (OptimalCommands "max"), -1 (OptimalCommands
+    "weighted": the objective is ``weights . f_c``) or None (Existence)."""
+    M = prob.model
+    var = None
+    if data.direction is not None:
+        var = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
+        M.set_objective([var], [1.0], maximize=True)
+    else:
+        prob.add_object_equilibrium(data.wrench)
+        if data.command_range is not None:
+            fc = prob.fc
+            if data.objective == "max":
+                var = M.add_var(0.0, float(data.command_range[1].max()), "C", "max_command")
+                for j in fc:  # t >= f_c,j
+                    M.add_row([var, int(j)], [1.0, -1.0], 0.0, INF)
+                M.set_objective([var], [1.0])
+            else:
+                var = -1
+                M.set_objective(fc, data.weights)
+    return var
+
+
+def query_value(model: Any, pt: ExactPoint, var: int | None, data: QueryModel) -> float | None:
+    """The query's value at ``pt`` (``model.prob`` the ExactProblem ``var`` came from):
+    ``s`` (MaxDisturbance, clipped to ``[0, cap]``), the largest or weighted commands
+    (OptimalCommands), None (Existence)."""
+    if var is None:
+        return None
+    if data.direction is not None:
+        return float(min(data.cap, max(0.0, pt.x[var])))
+    if var == -1:
+        return float(data.weights @ pt.x[model.prob.fc])
+    return float(pt.x[model.prob.fc].max(initial=0.0))
+
+
+class ExactMdp:
+    """The exact model: ExactProblem (no friction polygon) plus the tangential motions
+    ``d_t`` (``self.dt``, (m, 2)) and slide bounds ``s`` (``self.slide``) as linear
+    variables; the nonlinear rows are added on SCIP's model by :meth:`scip_model`."""
+
+    def __init__(self, grasp: Grasp, data: QueryModel, bounds: Any, eta: float,
+                 motion_bound: float) -> None:  # fmt: skip
+        self.grasp, self.eta = grasp, eta
+        prob = ExactProblem(grasp, data.preload, data.hand, bounds, friction=False,
+                            name="spatial", command_range=data.command_range)  # fmt: skip
+        self.prob = prob
+        M, m, B = prob.model, grasp.m, bounds.force
+        if data.max_normal_force is not None:
+            for j in prob.c[:, 0]:
+                M.ub[j] = min(M.ub[j], data.max_normal_force)
+        D = self.D = motion_bound * 2.0 * B
+        self.dt = M.add_vars(2 * m, -D, D, "C", "dt").reshape(m, 2)
+        self.slide = M.add_vars(m, 0.0, math.sqrt(2.0) * D, "C", "slide")
+        # the motions in the same box: translations D, rotations D / L, joints D / |J_j|
+        L = length_scale(grasp)
+        for k, j in enumerate(prob.r):
+            M.lb[j], M.ub[j] = (-D, D) if k < 3 else (-D / L, D / L)
+        if prob.q is not None:
+            cols = np.linalg.norm(prob.J, axis=0)
+            for k, j in enumerate(prob.q):
+                lim = D / cols[k] if cols[k] > 0 else D
+                M.lb[j], M.ub[j] = -lim, lim
+        Gt = prob.G.T.reshape(m, 3, -1)
+        Jt = None if prob.J is None else prob.J.reshape(m, 3, -1)
+        for i in range(m):
+            for t in range(2):  # d_t - G_t^T r + J_t q = 0
+                idx, val = prob._extend([int(self.dt[i, t])], [-1.0], prob.r, Gt[i, 1 + t])
+                if Jt is not None:
+                    idx, val = prob._extend(idx, val, prob.q, -Jt[i, 1 + t])
+                M.add_row(idx, val, 0.0, 0.0, f"tangent{i}.{t}")
+            # the cone's outer square, implied by the SOC: helps the first LP relaxations
+            cn, ct = int(prob.c[i, 0]), prob.c[i, 1:]
+            mu = float(grasp.mu[i])
+            for j in ct:
+                M.add_row([int(j), cn], [1.0, -mu], -INF, 0.0, f"square{i}+")
+                M.add_row([int(j), cn], [1.0, mu], 0.0, INF, f"square{i}-")
+        if eta > 0.0:  # d_n' = d_n cos(eta) + s sin(eta): the worst normal within eta
+            cols = set(prob.r.tolist()) | (set() if prob.q is None else set(prob.q.tolist()))
+            for i, r in enumerate(prob.spring_rows):
+                row = M.rows[r]
+                val = np.array([v * math.cos(eta) if j in cols else v
+                                for j, v in zip(row.idx, row.val, strict=True)])  # fmt: skip
+                M.rows[r] = Row(np.r_[row.idx, self.slide[i]].astype(np.int64),
+                                np.r_[val, math.sin(eta)], row.lo, row.hi, row.name)  # fmt: skip
+
+    def scip_model(
+        self, time_limit: float | None, verbose: bool, feastol: float, gap: float
+    ) -> tuple:
+        from .mip._scip import build_scip
+
+        m, x = build_scip(self.prob.model, time_limit, verbose, gap)
+        m.setParam("numerics/feastol", feastol)
+        g, c = self.grasp, self.prob.c
+        for i in range(g.m):
+            mu = float(g.mu[i])
+            cn, t1, t2 = (x[int(j)] for j in c[i])
+            d1, d2 = (x[int(j)] for j in self.dt[i])
+            s = x[int(self.slide[i])]
+            m.addCons(t1 * t1 + t2 * t2 <= mu * mu * cn * cn, name=f"cone{i}")
+            m.addCons(d1 * d1 + d2 * d2 <= s * s, name=f"slide{i}")
+            m.addCons(t1 * d1 + t2 * d2 + mu * cn * s <= 0.0, name=f"dissipation{i}")
+        return m, x
+
+    def violations(self, xv: NDArray[np.float64]) -> dict[str, float]:
+        """The linear model's exact-condition violations plus ``cone`` (``|c_t| - mu c_n``)
+        and ``dissipation`` (``c_t . d_t + mu c_n |d_t|`` with the true ``|d_t|``)."""
+        out = self.prob.model.violations(xv)
+        c = xv[self.prob.c]
+        dt = xv[self.dt]
+        ctn = np.linalg.norm(c[:, 1:], axis=1)
+        out["cone"] = float(np.max(ctn - self.grasp.mu * c[:, 0], initial=0.0))
+        diss = np.einsum("ij,ij->i", c[:, 1:], dt) + self.grasp.mu * c[:, 0] * np.linalg.norm(
+            dt, axis=1
+        )
+        out["dissipation"] = float(np.max(np.abs(diss), initial=0.0))
+        return out
+
+
+def polish(
+    ex: ExactMdp, x: NDArray[np.float64], gap: float, stats: dict[str, Any]
+) -> NDArray[np.float64]:
+    """SCIP's point made exact and tidy. With the binaries and each loaded contact's mode
+    fixed at SCIP's, every condition is linear:
+
+    * friction on the cone's boundary (``|c_t| >= (1 - 1e-4) mu c_n``): a slide direction
+      ``u``, ``d_t = sigma u``, ``s = sigma >= 0``, ``c_t = -mu c_n u``
+      (sliding, or about to);
+    * friction inside: ``d_t = 0``, ``s = 0``, ``c_t = kappa v`` with ``v`` SCIP's friction
+      direction and ``0 <= kappa <= mu c_n`` (sticking);
+    * unloaded (``c_n = 0``): ``c = 0``; the slide is free (its direction fixed when
+      ``eta > 0``, where ``s`` enters the spring law).
+
+    The LP optimises the query's objective over that, then :meth:`ExactProblem.tidy` takes
+    its least virtual motion (spatial branch-and-bound leaves a slide's free scale anywhere
+    in the box). The slide direction comes from SCIP's motion, or else from its friction
+    (:func:`mode_lp`); ``stats["polished"]`` says which. SCIP's point is kept when both
+    LPs fail or are worse by more than the gap."""
+    got = exact_point(ex, x, ("motion", "force"), gap)
+    stats["polished"] = False if got is None else got[1]
+    return x if got is None else got[0]
+
+
+def exact_point(
+    ex: ExactMdp, x: NDArray[np.float64], sources: tuple[str, ...], gap: float | None = None
+) -> tuple[NDArray[np.float64], str] | None:
+    """The least-motion optimum of the first :func:`mode_lp` (by ``sources``) that has one,
+    satisfies every exact condition (within ``1e-7 (1 + B)``) and, with ``gap``, is no worse
+    than ``x``'s objective by more than ``gap`` relative; with the source used. None if
+    none does."""
+    M = ex.prob.model
+    for source in sources:
+        got = mode_lp(ex, x, source)
+        if got is None:
+            continue
+        lp, res = got
+        if gap is not None:
+            old, new = M.objective_value(x), M.objective_value(res.x[: M.n_vars])
+            worse = (old - new) if M.maximize else (new - old)
+            if worse > (gap + 1e-6) * (1.0 + abs(old)):
+                continue
+        y = ex.prob.tidy(res.x, lp=lp)
+        y = (res.x if y is None else y)[: M.n_vars]
+        if max(ex.violations(y).values()) <= 1e-7 * (1.0 + ex.prob.bounds.force):
+            return y, source
+    return None
+
+
+def certify(
+    grasp: Grasp, data: QueryModel, bounds: ExactBounds, relaxed: ExactProblem,
+    x: NDArray[np.float64], var: int | None, eta: float, motion_bound: float,
+) -> tuple[ExactMdp, ExactPoint, float | None] | None:  # fmt: skip
+    """An exact solution near a relaxation's answer ``x`` (of ``relaxed``'s model, ``var``
+    its query variable): each contact keeps the relaxation's mode (open; sliding along its
+    motion ``d_t``; on the cone's boundary; sticking), and :func:`mode_lp` solves the exact
+    problem with those modes, optimising the query. Returns the exact model, its point and
+    query value, or None when those modes admit no exact solution. A certificate: Existence
+    is then stable; a MaxDisturbance's value is a lower bound on the exact optimum (the
+    relaxation's an upper one); an OptimalCommands' an upper bound."""
+    ex = ExactMdp(grasp, data, bounds, eta, motion_bound)
+    qvar = add_query(ex.prob, data)
+    prob = ex.prob
+    y = np.zeros(prob.model.n_vars)
+    y[: prob.n_base] = x[: relaxed.n_base]
+    d = prob.G.T @ y[prob.r]
+    if prob.J is not None:
+        d = d - prob.J @ y[prob.q]
+    dt = d.reshape(grasp.m, 3)[:, 1:]
+    y[ex.dt] = dt
+    y[ex.slide] = np.linalg.norm(dt, axis=1)
+    if qvar is not None and qvar >= 0 and var is not None and var >= 0:
+        y[qvar] = x[var]
+    got = exact_point(ex, y, ("relaxation", "force"))
+    if got is None:
+        return None
+    pt = prob.point(got[0])
+    return ex, pt, query_value(ex, pt, qvar, data)
+
+
+def mode_lp(ex: ExactMdp, x: NDArray[np.float64], source: str) -> tuple[Any, Any] | None:
+    """The LP of :func:`polish` (each contact's mode fixed at ``x``'s) and its optimum;
+    None when it has none. Contacts with friction on the cone's boundary slide along
+    ``x``'s motion (``source="motion"``: ``u = d_t / |d_t|`` where the contact clearly
+    moves) or against its friction (``"force"``: ``u = -c_t / |c_t|``); SCIP's two differ by
+    its tolerance, which one of them may not absorb. ``"relaxation"``: every contact that
+    moves at all slides along ``x``'s motion, whatever its friction (a relaxation's friction
+    only lies in the motion's sector)."""
+    from .mip import solve as mip_solve
+
+    prob, g = ex.prob, ex.grasp
+    M = prob.model
+    lp = M.fixed(x)
+    c, dt = x[prob.c], x[ex.dt]
+    dscale = 1e-7 * (1.0 + float(np.abs(dt).max(initial=0.0)))
+    fscale = 1e-7 * (1.0 + float(np.abs(c).max(initial=0.0)))
+
+    def slide(i: int, u: NDArray[np.float64]) -> None:  # d_t = sigma u, s = sigma >= 0
+        sig = lp.add_var(0.0, INF, "C", f"sigma{i}")
+        for t in range(2):
+            lp.add_row([int(ex.dt[i, t]), sig], [1.0, -float(u[t])], 0.0, 0.0)
+        lp.add_row([int(ex.slide[i]), sig], [1.0, -1.0], 0.0, 0.0)
+
+    def fix(js: Any) -> None:
+        for j in js:
+            lp.lb[int(j)] = lp.ub[int(j)] = 0.0
+
+    for i in range(g.m):
+        ci, ti = int(prob.c[i, 0]), [int(j) for j in prob.c[i, 1:]]
+        mu, cn = float(g.mu[i]), float(c[i, 0])
+        nt, nd = float(np.linalg.norm(c[i, 1:])), float(np.linalg.norm(dt[i]))
+        if cn <= fscale:  # unloaded
+            fix(prob.c[i])
+            if ex.eta > 0.0:
+                if nd > dscale:
+                    slide(i, dt[i] / nd)
+                else:
+                    fix((*ex.dt[i], ex.slide[i]))
+        elif source == "relaxation" and nd > dscale:  # the relaxation's slide
+            slide(i, dt[i] / nd)
+            for t in range(2):  # c_t = -mu c_n u
+                lp.add_row([ti[t], ci], [1.0, mu * float(dt[i, t] / nd)], 0.0, 0.0)
+        elif nt >= (1.0 - 1e-4) * mu * cn:  # on the boundary: slides along u (or is about to)
+            moves = nd > 1e3 * dscale
+            u = dt[i] / nd if source == "motion" and moves else -c[i, 1:] / nt
+            slide(i, u)
+            for t in range(2):  # c_t = -mu c_n u
+                lp.add_row([ti[t], ci], [1.0, mu * float(u[t])], 0.0, 0.0)
+        else:  # inside: sticks
+            fix((*ex.dt[i], ex.slide[i]))
+            if nt > fscale:
+                kap = lp.add_var(0.0, INF, "C", f"kappa{i}")
+                for t in range(2):
+                    lp.add_row([ti[t], kap], [1.0, -float(c[i, 1 + t] / nt)], 0.0, 0.0)
+                lp.add_row([kap, ci], [1.0, -mu], -INF, 0.0)
+            else:
+                fix(ti)
+    res = mip_solve(lp, backend="highs", polish=False)
+    if res.status != "optimal" or res.x is None:
+        return None
+    return lp, res
