@@ -1,6 +1,8 @@
 """Benchmarks: ``python -m stability.bench planar``, ``python -m stability.bench mip``
-(:mod:`stability.bench_mip`) and ``python -m stability.bench refinement``
-(:mod:`stability.bench_refinement`).
+(:mod:`stability.bench_mip`), ``python -m stability.bench refinement``
+(:mod:`stability.bench_refinement`), ``python -m stability.bench grasps``
+(:mod:`stability.bench_grasps`) and ``python -m stability.bench tradeoff``
+(:mod:`stability.bench_tradeoff`).
 
 ``planar`` reproduces the thesis' Table tab:performance (number of slip states
 and enumeration time for m = 2..9 random contacts) side by side with our
@@ -202,20 +204,45 @@ def print_table(rows: list[dict]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m stability.bench", description=__doc__)
-    ap.add_argument("which", choices=["planar", "mip", "refinement"], help="benchmark to run")
+    ap.add_argument("which", choices=["planar", "mip", "refinement", "grasps", "tradeoff"],
+                    help="benchmark to run")  # fmt: skip
     ap.add_argument("--max-levels", type=int, default=9,
                     help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
-    ap.add_argument("--time-limit", type=float, default=120.0,
-                    help="refinement: seconds per solve")  # fmt: skip
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="seconds per solve (default: refinement 120, grasps 60, "
+                    "tradeoff 60)")  # fmt: skip
+    ap.add_argument("--directions", type=int, default=10,
+                    help="grasps: max-disturbance directions per grasp")  # fmt: skip
+    ap.add_argument("--wrenches", type=int, default=10,
+                    help="grasps: optimal-commands wrenches per grasp")  # fmt: skip
+    ap.add_argument("--only", default=None,
+                    help="grasps: labels to run (e.g. 'abe'); tradeoff: query indices")  # fmt: skip
     ap.add_argument("--out", default="bench_out", help="folder for the CSV and PNG")
     ap.add_argument("--repeats", type=int, default=None,
                     help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
+    if args.which == "grasps":
+        from .bench_grasps import bench_grasps, print_grasps, summary, write_grasps
+
+        rows = bench_grasps(args.directions, args.wrenches, args.time_limit or 60.0,
+                            only=args.only)  # fmt: skip
+        print_grasps(summary(rows))
+        csv_path, png = write_grasps(rows, Path(args.out))
+        print(f"wrote {csv_path} and {png}")
+        return
+    if args.which == "tradeoff":
+        from .bench_tradeoff import bench_tradeoff, print_tradeoff, write_tradeoff
+
+        rows = bench_tradeoff(args.time_limit or 60.0, only=args.only)
+        print_tradeoff(rows)
+        csv_path, png = write_tradeoff(rows, Path(args.out))
+        print(f"wrote {csv_path} and {png}")
+        return
     if args.which == "refinement":
         from .bench_refinement import bench_refinement, write_refinement
 
-        rows = bench_refinement(args.max_levels, args.time_limit)
+        rows = bench_refinement(args.max_levels, args.time_limit or 120.0)
         csv_path, png = write_refinement(rows, Path(args.out))
         print(f"wrote {csv_path} and {png}")
         return
