@@ -7,12 +7,13 @@ finger along +y and +z (:data:`stability.examples.TENDON_FORCE`), and the thesis
 three-contact grasp embedded in z = 0 with preload 1 N along three in-plane directions
 (where ``planar`` applies). Settings: ``planar`` (embedded queries), ``gws`` (rigid
 fixtures only), ``no_mdp``, ``iterative``, ``refinement`` at q = 1..9 (4 initial edges,
-``4 * 2^q`` equivalent edges), full resolution ``refine=False`` at k = 8..2048 edges, ``refinement``
-(q = 7) stopping once its certified exact value is within ``certify_gap`` = 1e-2, 1e-3,
-1e-4 of the relaxation's bound, and ``spatial``. The error of one answer is ``|v - v_spatial| / v_spatial`` (an "unstable"
-answer counts as 0 N). Each solve is limited to ``--time-limit`` seconds; a time-out is
-drawn at the limit and has no error. Writes ``tradeoff.csv`` (one row per solve) and
-``tradeoff.png`` (every solve, and each setting's median time and error).
+``4 * 2^q`` equivalent edges), full resolution ``refine=False`` at k = 8..2048 edges,
+``refinement`` (q = 7) stopping once its certified exact value is within ``certify_gap`` =
+1e-2, 1e-3, 1e-4 of the relaxation's bound, and ``spatial``. The error of one answer is
+``|v - v_spatial| / v_spatial`` (an "unstable" answer counts as 0 N). Each solve is
+limited to ``--time-limit`` seconds; a time-out is drawn at the limit and has no error.
+Writes ``tradeoff.csv`` (one row per solve) and ``tradeoff.png`` (every solve, and each
+setting's median time and error).
 """
 
 from __future__ import annotations
