@@ -92,7 +92,8 @@ def bench_tradeoff(time_limit: float = 60.0, only: str | None = None,
                 gg, qq = planar
             t0 = time.perf_counter()
             try:
-                sol = solve(gg, qq, method=method, time_limit=time_limit, **opts)
+                limit = {} if method in ("planar", "gws") else {"time_limit": time_limit}
+                sol = solve(gg, qq, method=method, **limit, **opts)
             except (GraspError, MethodError):
                 continue  # the method does not take this grasp (gws: hands)
             t = time.perf_counter() - t0
@@ -139,6 +140,17 @@ COLORS = {"planar": "C2", "gws": "C7", "no_mdp": "C3", "iterative": "C4",
           "spatial": "k"}  # fmt: skip
 
 
+def read_tradeoff(path: Path) -> list[dict[str, Any]]:
+    """Rows of a ``tradeoff.csv`` (numbers parsed; empty fields None)."""
+    rows = []
+    with Path(path).open() as fh:
+        for r in csv.DictReader(fh):
+            for k in ("time_s", "value", "reference", "error"):
+                r[k] = None if r[k] == "" else float(r[k])
+            rows.append(r)
+    return rows
+
+
 def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     import matplotlib
 
@@ -151,7 +163,7 @@ def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    fig, ax = plt.subplots(figsize=(8.5, 5.5))
+    fig, ax = plt.subplots(figsize=(10.5, 5.5))
     for r in rows:
         col = COLORS[r["family"]]
         if r["error"] is None:
@@ -171,17 +183,18 @@ def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
             for m, x, y in zip(ms, xs, ys, strict=True):
                 ax.annotate(m["setting"].split()[-1], (x, y), fontsize=7, xytext=(3, 3),
                             textcoords="offset points", color=col)  # fmt: skip
-    ax.axhline(FLOOR, color="grey", lw=0.5, ls=":")
-    ax.text(ax.get_xlim()[0], FLOOR * 1.3, f" error <= {FLOOR:g}", fontsize=7, color="grey")
-    ax.axhline(3.0, color="grey", lw=0.5, ls=":")
-    ax.text(ax.get_xlim()[0], 3.5, " time-outs (x)", fontsize=7, color="grey")
     ax.set_xscale("log")
+    tr = ax.get_yaxis_transform()
+    ax.axhline(FLOOR, color="grey", lw=0.5, ls=":")
+    ax.text(0.01, FLOOR * 1.3, f"error <= {FLOOR:g}", fontsize=7, color="grey", transform=tr)
+    ax.axhline(3.0, color="grey", lw=0.5, ls=":")
+    ax.text(0.01, 3.5, "time-outs (x)", fontsize=7, color="grey", transform=tr)
     ax.set_yscale("log")
     ax.set_xlabel("time per query [s] (log)")
     ax.set_ylabel("relative error of the max disturbance vs spatial (log)")
     ax.set_title("speed vs accuracy: 6 queries, every method and setting (dots: single solves)")
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=8, loc="center right")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     png = out / "tradeoff.png"
     fig.savefig(png, dpi=120)
