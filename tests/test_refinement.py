@@ -256,6 +256,28 @@ def test_optimal_commands_limits() -> None:
             solve(g, OptimalCommands(w, **bad), method="refinement")
 
 
+def test_optimal_commands_flask_pattern() -> None:
+    """The thesis' flask example: with 0.1 N m on every finger the grasp resists at most W
+    along a direction; the optimal commands for the load W in that direction leave finger 1
+    unloaded and every command below 0.1 (thesis: [0, 0.042, 0.073]): much of the naive
+    preload is wasted. Here a three-finger grasp (random_fingers, seed 11, the fourth draw)
+    pushed along -y: W = 0.115 N, optimal commands about [0, 0.012, 0.098]."""
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        g = examples.random_fingers(rng, 3)
+    d = np.array([0, -1.0, 0, 0, 0, 0])
+    top = _max(g, d, commands=[0.1] * 3)
+    assert top.stable and 0.05 < top.value < 0.5
+    w = top.value * d
+    sol = solve(g, OptimalCommands(w), method="refinement")
+    _check(sol)
+    cmd = sol.commands
+    assert cmd[0] <= 1e-6 and np.all(cmd[1:] > 1e-3)  # finger 1 unloaded, the others not
+    assert cmd.max() < 0.1  # below the naive preload
+    assert _stable(g, w, commands=cmd * (1 + 1e-6)) is True
+    assert _stable(g, w, commands=np.minimum(cmd, 0.95 * cmd.max())) is False
+
+
 # ---------------------------------------------------------------- agreement with other methods
 
 
