@@ -370,6 +370,7 @@ def _round(
     ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands)."""
     rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
     var = add_query(rel.prob, data)
+    rel.prob.model.many_small = True
     pt = run(rel.prob, opts, stats)
     return rel, pt, var
 

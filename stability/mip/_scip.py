@@ -47,6 +47,17 @@ def build_scip(
     # answer "optimal" with a wrong value once the model's bounds reach ~1e4 (measured:
     # the pinch pushed into a finger with cap 2000 gave 0 instead of the cap)
     m.setParam("constraints/indicator/maxcouplingvalue", 1e9)
+    if model.many_small:
+        # one of many small MIPs (a refinement round): cutting planes and primal heuristics
+        # cost more than they save. Measured on the bench grasps' 3-contact queries
+        # (python -m stability.bench grasps): 18.4 s -> 7.2 s for six queries, the same
+        # answers (SCIP's EASYCIP emphasis: 14.8 s); 4-contact checks 4.7 -> 1.2 s and
+        # 11.1 -> 3.1 s. Not for iterative, whose scheme follows the MIPs' particular
+        # optimal vertices and stopped converging on the wedge with it.
+        import pyscipopt as scip
+
+        m.setSeparating(scip.SCIP_PARAMSETTING.OFF)
+        m.setHeuristics(scip.SCIP_PARAMSETTING.OFF)
     x = [
         m.addVar(
             name=model.var_names[j],

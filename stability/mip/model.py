@@ -97,6 +97,9 @@ class MipModel:
         self.objective = np.zeros(0)
         self.maximize = False
         self.offset = 0.0
+        # one of many small MIPs solved in a row (refinement rounds): SCIP then runs without
+        # separators and primal heuristics (stability.mip._scip.build_scip)
+        self.many_small = False
 
     # ---------------------------------------------------------------- variables
 
