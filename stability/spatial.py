@@ -18,23 +18,30 @@ equality throughout: either ``c_n = 0`` (an open or unloaded contact, no frictio
 eq. mdp). SCIP handles the cones as convex and the bilinear row by spatial branching on
 ``c_t, d_t, c_n, s`` with McCormick envelopes, so every variable there needs finite
 bounds: forces from :func:`~stability.exact.scale_bounds` (``|c_t| <= mu B``), tangential
-motions ``|d_t| <= motion_bound * 2 B`` (the same box as ``refinement``'s edge weights;
-an answer at it is flagged ``stats["at_bound"]``).
+motions ``|d_t| <= motion_bound * 2 B`` (the same box as ``refinement``'s edge weights),
+translations within that, rotations within it over the grasp's size ``L`` and joint
+motions within it over their lever; an answer at the box is flagged ``stats["at_bound"]``.
 
 Queries: ``Existence``, ``MaxDisturbance`` (maximise ``s``), ``OptimalCommands`` (the
 objectives and limits of ``refinement``), all in one solve. Options: ``time_limit`` (a
 time-out returns ``status="timeout"`` with SCIP's incumbent and dual bound in
-``stats["incumbent"]``/``stats["dual_bound"]``), ``bound_factor``, ``verbose``,
-``normal_uncertainty`` (eta: the spring law uses ``d_n cos eta + s_i sin eta``, the
-worst normal within eta, as ``refinement`` does), ``motion_bound``, ``feastol`` (SCIP's
-feasibility tolerance, default 1e-9 relative). Backend: SCIP only (HiGHS has no nonlinear
+``stats["incumbent"]``/``stats["dual_bound"]``), ``gap`` (relative optimality gap at which
+SCIP stops, default 1e-4), ``bound_factor``, ``verbose``, ``normal_uncertainty`` (eta: the
+spring law uses ``d_n cos eta + s_i sin eta``, the worst normal within eta, as
+``refinement`` does), ``motion_bound``, ``feastol`` (SCIP's feasibility tolerance, default
+its own 1e-6; 1e-9 made SoPlex ask for 1e-12). Backend: SCIP only (HiGHS has no nonlinear
 rows).
 
-Every answer is checked against the exact conditions (the linear model's, the cone and
-maximum dissipation) before it is returned: one that fails them beyond ``1e-6 (1 + B)``
-(B the force bound) is ``status="error"``, never a silent wrong answer. This is global
-optimisation: exact up to SCIP's tolerances, and its time grows quickly with the number of
-contacts (``python -m stability.bench tradeoff``).
+SCIP's point is then polished (:func:`stability._exactmdp.polish`): with the binaries and
+each contact's mode fixed (sliding along ``u``, sticking, open) the exact problem is an LP,
+whose least-motion optimum replaces SCIP's point when it is no worse than the gap
+(``stats["polished"]``: ``"motion"``/``"force"``, where the slide direction came from, or
+False). Every answer is checked against the exact conditions (the linear model's, the
+cone and maximum dissipation) before it is returned: force conditions within
+``1e-6 (1 + B)``, dissipation within that times the motion's scale; anything worse is
+``status="error"``, never a silent wrong answer. This is global optimisation: exact up
+to SCIP's tolerances and the gap, and its time grows quickly with the number of contacts
+(``python -m stability.bench tradeoff``; README).
 """
 
 from __future__ import annotations
