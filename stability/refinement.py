@@ -56,6 +56,17 @@ not among the enforced ``Solution.conditions``.
 Queries, all by the same loop: ``Existence`` (feasibility), ``MaxDisturbance`` (maximise
 ``s``, one MIP per level, no bisection), ``OptimalCommands`` (minimise the largest command,
 or ``weights . f_c``; per-actuator ``lower``/``upper``; ``max_normal_force``).
+
+Certificates (``certify=True``, default): after each round the answer's contact modes
+(open; sliding along its motion; friction on the cone's boundary; sticking) are fixed and
+the *exact* problem (circular cone, maximum dissipation) becomes one LP
+(:func:`stability._exactmdp.certify`); a point of it is an exact solution. ``Existence``
+returns it at once (stable). ``MaxDisturbance`` / ``OptimalCommands`` return it when its
+value meets the relaxation's bound within ``certify_gap`` (default 1e-6): the exact
+optimum lies between the two. Otherwise the loop goes on and the best certified value is
+``stats["exact_value"]`` beside the relaxation's answer; ``stats["certified"]`` says which
+was returned. A returned certificate satisfies every condition, ``friction_cone`` and
+``max_dissipation`` included.
 """
 
 from __future__ import annotations
