@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._mipcommon import QueryData
+from ._mipcommon import CONDITIONS, QueryData
 from .errors import GraspError
 from .exact import (
     ExactBounds,
@@ -36,8 +36,8 @@ from .mip import INF
 from .mip.model import Row
 from .queries import OptimalCommands
 
-__all__ = ["ExactMdp", "QueryModel", "add_query", "certify", "exact_point", "mode_lp", "polish",
-           "query_value"]  # fmt: skip
+__all__ = ["ExactMdp", "QueryModel", "add_query", "certify", "exact_conditions", "exact_point",
+           "mode_lp", "polish", "query_value"]  # fmt: skip
 
 
 @dataclass
@@ -98,6 +98,14 @@ class QueryModel:
 
 def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
     return actuator_vector(v, a, f"OptimalCommands {name}", default)
+
+
+def exact_conditions(eta: float) -> tuple[str, ...]:
+    """The :func:`~stability.solution.model_residuals` keys an exact answer satisfies: all,
+    maximum dissipation included; with a normal uncertainty ``eta > 0`` the spring law of
+    the *nominal* normals is not what was solved, so not ``spring_law``."""
+    out = (*CONDITIONS, "max_dissipation")
+    return out if eta == 0 else tuple(c for c in out if c != "spring_law")
 
 
 def add_query(prob: ExactProblem, data: QueryModel) -> int | None:

@@ -78,7 +78,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._exactmdp import QueryModel, add_query, certify, query_value
+from ._exactmdp import QueryModel, add_query, certify, exact_conditions, query_value
 from ._mipcommon import (
     CONDITIONS,
     MipOptions,
@@ -485,9 +485,7 @@ def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], bes
     stats["cone_excess"] = 0.0
     stats["cone_excess_bound"] = edge_length(ro.levels + 1, ro.gamma, ro.levels) - 1.0
     stats["exact_value"] = value
-    conditions = (*CONDITIONS, "max_dissipation")
-    if ro.normal_uncertainty > 0:
-        conditions = tuple(c for c in conditions if c != "spring_law")
+    conditions = exact_conditions(ro.normal_uncertainty)
     if data.direction is not None:
         stats["capped"] = False
     sol = solution(method, grasp, query, True, stats, ex.prob, pt, value, conditions=conditions)

@@ -53,8 +53,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._exactmdp import ExactMdp, QueryModel, add_query, polish, query_value
-from ._mipcommon import CONDITIONS, MipOptions, Stop, bounds_stats, solution, stopped
+from ._exactmdp import ExactMdp, QueryModel, add_query, exact_conditions, polish, query_value
+from ._mipcommon import MipOptions, Stop, bounds_stats, solution, stopped
 from .api import register
 from .errors import GraspError, MethodError
 from .exact import scale_bounds
@@ -95,9 +95,7 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": eta, "feastol": feastol}
     bounds_stats(bounds, stats)
-    conditions = CONDITIONS + ("max_dissipation",)
-    if eta > 0:
-        conditions = tuple(c for c in conditions if c != "spring_law")
+    conditions = exact_conditions(eta)
     t0 = time.perf_counter()
     ex = ExactMdp(grasp, data, bounds, eta, motion_bound)
     var = add_query(ex.prob, data)
