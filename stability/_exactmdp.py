@@ -210,6 +210,9 @@ class ExactMdp:
             s = x[int(self.slide[i])]
             m.addCons(t1 * t1 + t2 * t2 <= mu * mu * cn * cn, name=f"cone{i}")
             m.addCons(d1 * d1 + d2 * d2 <= s * s, name=f"slide{i}")
+            if self.eta > 0.0:  # s enters the spring law: it must be |d_t| itself, also
+                # where the contact is unloaded (nonconvex; SCIP branches on it)
+                m.addCons(s * s <= d1 * d1 + d2 * d2, name=f"slide{i}.exact")
             m.addCons(t1 * d1 + t2 * d2 + mu * cn * s <= 0.0, name=f"dissipation{i}")
         return m, x
 
@@ -225,6 +228,9 @@ class ExactMdp:
             dt, axis=1
         )
         out["dissipation"] = float(np.max(np.abs(diss), initial=0.0))
+        if self.eta > 0.0:  # the robust spring law uses s: it must equal |d_t|
+            gap = np.abs(xv[self.slide] - np.linalg.norm(dt, axis=1))
+            out["slide"] = float(np.max(gap, initial=0.0))
         return out
 
 
@@ -291,6 +297,8 @@ def certify(
     ex = ExactMdp(grasp, data, bounds, eta, motion_bound)
     qvar = add_query(ex.prob, data)
     prob = ex.prob
+    if prob.n_base != relaxed.n_base:
+        raise AssertionError("certify: the exact and relaxed models' base variables differ")
     y = np.zeros(prob.model.n_vars)
     y[: prob.n_base] = x[: relaxed.n_base]
     d = prob.G.T @ y[prob.r]

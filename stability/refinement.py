@@ -425,13 +425,14 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
             if ro.certify:
-                cert = certify(grasp, data, bounds, rel.prob, pt.x, var, ro.normal_uncertainty,
-                               ro.motion_bound)  # fmt: skip
+                # the bounds the relaxation was built with: the cap may have been tightened
+                cert = certify(grasp, data, rel.prob.bounds, rel.prob, pt.x, var,
+                               ro.normal_uncertainty, ro.motion_bound)  # fmt: skip
                 row["exact"] = None if cert is None else cert[2]
                 if cert is not None and (best is None or _better(cert[2], best[2], data)):
                     best = cert
                 if best is not None and _closed(best[2], row["value"], data, ro.certify_gap):
-                    return _certified(method, grasp, query, stats, best, trace, ro, data)
+                    return _certified(method, grasp, query, stats, best, trace, ro, data, cap0)
             n = rel.refine(pt) if ro.refine else 0
             row["refined"] = n
             if n == 0:
@@ -477,7 +478,7 @@ def _closed(exact: float | None, relaxed: float | None, data: QueryModel, gap: f
 
 
 def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
-               trace: list, ro: _Opts, data: QueryModel) -> Solution:  # fmt: skip
+               trace: list, ro: _Opts, data: QueryModel, cap0: float) -> Solution:  # fmt: skip
     """The Solution of a certified exact point (module docstring, "Certificates")."""
     ex, pt, value = best
     stats["certified"] = True
@@ -486,8 +487,8 @@ def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], bes
     stats["cone_excess_bound"] = edge_length(ro.levels + 1, ro.gamma, ro.levels) - 1.0
     stats["exact_value"] = value
     conditions = exact_conditions(ro.normal_uncertainty)
-    if data.direction is not None:
-        stats["capped"] = False
+    if data.direction is not None:  # at the user's cap: "at least cap", not a maximum
+        stats["capped"] = value >= cap0 * (1 - 1e-8)
     sol = solution(method, grasp, query, True, stats, ex.prob, pt, value, conditions=conditions)
     if data.command_range is not None:
         sol.commands = pt.x[ex.prob.fc]

@@ -110,7 +110,10 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
             stats["capped"] = False
         return solution("spatial", grasp, query, False, stats, conditions=conditions)
     pt = ex.prob.point(res)
-    pt.at_bound = pt.at_bound or bool(np.any(np.abs(res[ex.dt]) >= 0.99 * ex.D))
+    M = ex.prob.model
+    motion = np.r_[ex.dt.reshape(-1), ex.prob.r, [] if ex.prob.q is None else ex.prob.q]
+    box = np.array([M.ub[int(j)] for j in motion])
+    pt.at_bound = pt.at_bound or bool(np.any(np.abs(res[motion.astype(int)]) >= 0.99 * box))
     value = query_value(ex, pt, var, data)
     if data.direction is not None:
         stats["capped"] = value >= data.cap * (1 - 1e-8)
@@ -129,6 +132,7 @@ def _run(ex: ExactMdp, opts: MipOptions, feastol: float, gap: float,
     t0 = time.perf_counter()
     try:
         m, x = ex.scip_model(opts.time_limit, opts.verbose, feastol, gap)
+        m.setParam("limits/absgap", 1e-9)  # gap is relative: small answers need it so
         raw = optimize_scip(m, x, ex.prob.model, t0)
     except Exception as e:  # noqa: BLE001  (a solver's internal failure is a status)
         raise Stop("error", f"scip failed: {type(e).__name__}: {e}") from None

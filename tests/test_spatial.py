@@ -90,6 +90,18 @@ def test_optimal_commands_and_robustness() -> None:
     assert robust <= nominal * (1 + 1e-6)
 
 
+def test_robust_spring_law_uses_the_true_slide() -> None:
+    """With eta > 0 the slide bound s enters the spring law, so it must equal |d_t| (a
+    free s would unload any contact): on the preloaded embedded grasp the robust answer
+    never exceeds the nominal one and its s equals |d_t| (stats violations "slide")."""
+    g = examples.three_embedded()
+    q = MaxDisturbance(examples.embed_wrench((1, 1, 0.02)), preload=1.0, cap=100.0)
+    nominal = solve(g, q, method="spatial")
+    robust = solve(g, q, method="spatial", normal_uncertainty=0.2)
+    assert robust.status == "solved" and robust.value <= nominal.value * (1 + 1e-6)
+    assert robust.stats["violations"]["slide"] <= 1e-7
+
+
 def test_refinement_existence_certificate_is_exact() -> None:
     """A stable refinement answer whose relaxed point survives the exact LP with its
     modes is returned as that exact point: every condition, maximum dissipation and the
