@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--max-levels", type=int, default=9,
                     help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
     ap.add_argument("--time-limit", type=float, default=None,
-                    help="seconds per solve (default: refinement 120, grasps 60, "
+                    help="seconds per query (default: refinement 120, grasps 60, "
                     "tradeoff 60)")  # fmt: skip
     ap.add_argument("--directions", type=int, default=10,
                     help="grasps: max-disturbance directions per grasp")  # fmt: skip
