@@ -28,9 +28,16 @@ those of row 2's physics (median over the grasps).
 
 ``--train`` adds PPO training throughput (env steps/s including the updates) with
 ``python -m train.ppo``'s default settings (4 x 512 nets, 16 envs, 6,144-step
-rollouts), the envs stepped in the training process and in 2 worker processes
-(``train.vec.ChunkedVecEnv``, the default), beside the thesis' 474 env steps/s
-(15.36M steps in about 9 h).
+rollouts), the envs stepped in the training process, in 2 worker processes
+(``train.vec.ChunkedVecEnv``), and in 2 worker processes with pipelined rollouts
+(``train.pipeline.PipelinedPPO``, the default), beside the thesis' 474 env steps/s
+(15.36M steps in about 9 h). The three setups take turns rollout by rollout in one
+process (``--train-rollouts`` each); the ratio column is the median of the per-turn
+ratios to the in-process setup.
+
+``--fidelity`` adds what coarser physics would change in what the policy sees
+(:func:`timestep_fidelity`: one policy step from the shipped policy's states against a
+converged reference), written to four_finger_fidelity.csv.
 
 Writes ``--out``/four_finger_env.csv and four_finger_env.png.
 """
@@ -46,7 +53,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from envs.four_finger import FRAME_SKIP, TIMESTEP, FourFingerRotate, grasp_cache
+from envs.four_finger import FRAME_SKIP, TIMESTEP, FourFingerRotate, grasp_cache, yaw_rate
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
 from stability import GraspError
@@ -153,9 +160,97 @@ def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
     return np.array(res)
 
 
-def train_steps_per_second(total: int = 12_288, workers: int = 0) -> float:
-    """PPO training throughput with train.ppo's defaults, env steps/s including updates;
-    ``workers`` processes step the 16 envs (0: the training process, ``DummyVecEnv``)."""
+FIDELITY = (  # label, timestep [s], substeps, solver, tolerance
+    ("1 ms x 50, Newton converged", 0.001, 50, "newton", 1e-12),
+    ("2 ms x 25, PGS 1e-8", 0.002, 25, "pgs", 1e-8),
+    ("2 ms x 25, PGS 1e-6 (shipped)", 0.002, 25, "pgs", 1e-6),
+    ("2.5 ms x 20, PGS 1e-6", 0.0025, 20, "pgs", 1e-6),
+    ("3.125 ms x 16, PGS 1e-6", 0.003125, 16, "pgs", 1e-6),
+)
+
+
+def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, object]]:
+    """What the policy sees under coarser physics: from states of the shipped policy's
+    rollouts (every ``every``-th step of ``episodes`` episodes, with that step's action
+    applied), one policy step (50 ms) per setting of :data:`FIDELITY`, compared with a
+    converged reference (0.5 ms x 100, Newton to 1e-12): the reward (the object's yaw rate
+    [rad/s]), the object's position [mm] and the observed link normal forces [N]
+    (largest link error per state); median and 95th percentile over the states."""
+    from train.gait import SHIPPED as POLICY
+    from train.gait import load_policy
+
+    act, kw = load_policy(POLICY)
+    env = FourFingerRotate(**kw)
+    m, d, ph = env.model, env.data, env._ph
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
+    states = []
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=ep)
+        for t in range(64):
+            a = act(obs)
+            if t % every == 0:  # the state the step starts from, setpoints already moved
+                ctrl0 = d.ctrl.copy()
+                step = np.clip(a, -1, 1) * env.max_setpoint_step
+                d.ctrl[:] = np.clip(d.ctrl + step, ph.ctrl_lo, ph.ctrl_hi)
+                s = np.empty(mujoco.mj_stateSize(m, spec))
+                mujoco.mj_getState(m, d, s, spec)
+                d.ctrl[:] = ctrl0
+                states.append(s)
+            obs, _, terminated, _, _ = env.step(a)
+            if terminated:
+                break
+
+    def outcome(timestep: float, substeps: int, solver: str, tol: float) -> np.ndarray:
+        m.opt.timestep, m.opt.tolerance = timestep, tol
+        m.opt.solver = (
+            mujoco.mjtSolver.mjSOL_NEWTON if solver == "newton" else mujoco.mjtSolver.mjSOL_PGS
+        )
+        m.opt.iterations = 1000 if tol < 1e-10 else 100
+        out = []
+        for s in states:
+            mujoco.mj_setState(m, d, s, spec)
+            mujoco.mj_forward(m, d)
+            q0 = ph.object_quat().copy()
+            mujoco.mj_step(m, d, nstep=substeps)
+            _, fn, _ = ph.link_contacts()
+            rate = yaw_rate(q0, ph.object_quat(), timestep * substeps)
+            out.append([rate, *(ph.object_pos() * 1e3), *fn])
+        return np.array(out)
+
+    ref = outcome(0.0005, 100, "newton", 1e-12)
+    rows = []
+    for label, *setting in FIDELITY:
+        e = outcome(*setting) - ref  # type: ignore[arg-type]
+        yaw, pos = np.abs(e[:, 0]), np.linalg.norm(e[:, 1:4], axis=1)
+        force = np.abs(e[:, 4:]).max(axis=1)
+        rows.append(
+            {
+                "setting": label,
+                "states": len(states),
+                "yaw_rate_err_median": round(float(np.median(yaw)), 4),
+                "yaw_rate_err_p95": round(float(np.percentile(yaw, 95)), 4),
+                "pos_err_mm_median": round(float(np.median(pos)), 4),
+                "pos_err_mm_p95": round(float(np.percentile(pos, 95)), 4),
+                "force_err_median": round(float(np.median(force)), 4),
+                "force_err_p95": round(float(np.percentile(force, 95)), 4),
+                "yaw_rate_median_abs": round(float(np.median(np.abs(ref[:, 0]))), 4),
+            }
+        )
+    return rows
+
+
+TRAIN_SETUPS = {  # name: (worker processes, pipelined rollouts)
+    "PPO training (4x512, 16 envs in-process)": (0, False),
+    "PPO training (4x512, 16 envs 2 worker processes)": (2, False),
+    "PPO training (4x512, 16 envs 2 workers, pipelined: default)": (2, True),
+}
+
+
+def train_steps_per_second(rollouts: int = 6) -> dict[str, list[float]]:
+    """PPO training throughput with train.ppo's defaults (env steps/s including updates),
+    per setup of :data:`TRAIN_SETUPS`: all setups are built (and warmed up by one rollout
+    and update) in this process, then take turns, one rollout + update each, ``rollouts``
+    times, so that a drift of the machine's speed hits them alike."""
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -165,16 +260,26 @@ def train_steps_per_second(total: int = 12_288, workers: int = 0) -> float:
 
     cfg = rotate.RotateConfig()
     torch.set_num_threads(cfg.threads)
-    thunks = [rotate.make_env(cfg, s) for s in RunSeeds(0).envs("train", cfg.n_envs)]
-    vec = VecNormalize(make_vec_env(thunks, workers))
-    model = rotate.build_model(cfg, vec)
-    cb = rotate.RolloutThreads(cfg.threads) if workers else None
-    model.learn(cfg.n_steps * cfg.n_envs, callback=cb)  # warm-up: worker start, first update
-    t = time.perf_counter()
-    model.learn(total, callback=cb, reset_num_timesteps=False)
-    rate = total / (time.perf_counter() - t)
-    vec.close()
-    return rate
+    n = cfg.n_steps * cfg.n_envs
+    built = {}
+    for name, (workers, pipeline) in TRAIN_SETUPS.items():
+        thunks = [rotate.make_env(cfg, s) for s in RunSeeds(0).envs("train", cfg.n_envs)]
+        vec = VecNormalize(make_vec_env(thunks, workers, parts=2 if pipeline else 1))
+        model = rotate.build_model(cfg, vec)  # PipelinedPPO: plain PPO unless parts >= 2
+        cb = rotate.RolloutThreads(cfg.threads) if workers else None
+        model.learn(n, callback=cb)  # warm-up: worker start, first update
+        built[name] = (model, cb, vec)
+    rates: dict[str, list[float]] = {name: [] for name in built}
+    for r in range(rollouts):
+        order = list(built) if r % 2 == 0 else list(built)[::-1]
+        for name in order:
+            model, cb, _ = built[name]
+            t = time.perf_counter()
+            model.learn(n, callback=cb, reset_num_timesteps=False)
+            rates[name].append(n / (time.perf_counter() - t))
+    for _, _, vec in built.values():
+        vec.close()
+    return rates
 
 
 def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
@@ -183,6 +288,10 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     p.add_argument("--repeats", type=int, default=5, help="repeats per row (median reported)")
     p.add_argument("--train", action=argparse.BooleanOptionalAction, default=True,
                    help="also measure PPO training throughput")  # fmt: skip
+    p.add_argument("--fidelity", action=argparse.BooleanOptionalAction, default=True,
+                   help="also measure what coarser timesteps change")  # fmt: skip
+    p.add_argument("--train-rollouts", type=int, default=6,
+                   help="rollouts (6,144 steps + update) per training setup")  # fmt: skip
     p.add_argument("--out", default="bench_out", help="directory for the CSV and PNG")
     a = p.parse_args(argv)
     out = Path(a.out)
@@ -217,15 +326,38 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             f"{r['pos_diff_mm']:.3f} mm"
         )
     if a.train:
-        for workers in (0, 2):
-            rate = train_steps_per_second(workers=workers)
-            where = f"{workers} worker processes" if workers else "in-process"
-            name = f"PPO training (4x512, 16 envs {where})"
-            rows.append({"config": name, "env_steps_per_s": round(rate, 1)})
-            print(f"{name}: {rate:.0f} env steps/s including updates")
+        rates = train_steps_per_second(a.train_rollouts)
+        first = None
+        for name, sps in rates.items():
+            med = float(np.median(sps))
+            first = first or sps
+            ratio = float(np.median(np.array(sps) / np.array(first)))
+            rows.append(
+                {
+                    "config": name,
+                    "env_steps_per_s": round(med, 1),
+                    "min": round(min(sps), 1),
+                    "max": round(max(sps), 1),
+                    "ratio_to_landed": None,
+                    "ratio_to_in_process": round(ratio, 2),
+                }
+            )
+            print(f"{name}: {med:.0f} env steps/s including updates (x{ratio:.2f} in-process)")
+    if a.fidelity:
+        fid = timestep_fidelity()
+        with (out / "four_finger_fidelity.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(fid[0]))
+            w.writeheader()
+            w.writerows(fid)
+        for r in fid:
+            print(
+                f"{r['setting']:32s} yaw rate error {r['yaw_rate_err_median']:.3f} "
+                f"(p95 {r['yaw_rate_err_p95']:.3f}) rad/s, object {r['pos_err_mm_median']:.3f} mm, "
+                f"link force {r['force_err_median']:.3f} N"
+            )
     thesis = round(THESIS_STEPS_PER_S)
     rows.append({"config": "thesis training (server)", "env_steps_per_s": thesis})
-    fields = list(rows[0])
+    fields = list(dict.fromkeys(k for r in rows for k in r))
     with (out / "four_finger_env.csv").open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=fields)
         w.writeheader()

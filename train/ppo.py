@@ -400,10 +400,15 @@ def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
     return new_ppo(cfg, vec_env, learning_rate)
 
 
-def new_ppo(cfg: Any, vec_env: VecEnv, learning_rate: float | Callable[[float], float]) -> PPO:
-    """SB3 PPO from a config's settings: separate policy and value nets ``cfg.pi``/``cfg.vf``,
-    ``seed=None`` (see :func:`build_model`), CPU."""
-    return PPO(
+def new_ppo(
+    cfg: Any,
+    vec_env: VecEnv,
+    learning_rate: float | Callable[[float], float],
+    algo: type[PPO] = PPO,
+) -> PPO:
+    """SB3 PPO (or the subclass ``algo``) from a config's settings: separate policy and value
+    nets ``cfg.pi``/``cfg.vf``, ``seed=None`` (see :func:`build_model`), CPU."""
+    return algo(
         "MlpPolicy",
         vec_env,
         learning_rate=learning_rate,

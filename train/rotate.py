@@ -45,6 +45,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import OBJECTS, grasp_cache
+from train.pipeline import PipelinedPPO
 from train.ppo import (
     build_parser,
     new_ppo,
@@ -89,6 +90,11 @@ class RotateConfig:
     n_envs: int = opt(16, "parallel training envs")
     workers: int = opt(
         2, "processes that step the training envs, each its share (train.vec); 0: in this one"
+    )
+    pipeline: bool = opt(
+        True,
+        "with workers: overlap the policy's forward passes with the physics "
+        "(train.pipeline; the same transitions)",
     )
     pi: list[int] = opt([512, 512, 512, 512], "hidden layers of the policy net (thesis: 4 x 512)")
     vf: list[int] = opt([512, 512, 512, 512], "hidden layers of the separate value net")
@@ -162,8 +168,10 @@ def make_env(
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
-    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), constant lr."""
-    return new_ppo(cfg, vec_env, cfg.learning_rate)
+    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), constant lr;
+    :class:`train.pipeline.PipelinedPPO`, which pipelines its rollouts over a
+    ``ChunkedVecEnv`` with parts and is plain SB3 PPO on any other env."""
+    return new_ppo(cfg, vec_env, cfg.learning_rate, algo=PipelinedPPO)
 
 
 def evaluate_rotation(
@@ -371,7 +379,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     cfg = parse_config(argv)
     torch.set_num_threads(cfg.threads)
     name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-    keep = ("total_steps", "progress", "verbose", "threads", "workers")
+    keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
     cfg, run_dir = open_run(cfg, name, keep=keep)
     grasp_cache(cfg.object, cfg.gravity)  # build the start-state cache once, before any worker
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
@@ -383,7 +391,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
         for i, s in enumerate(seeds.envs("train", cfg.n_envs))
     ]
-    vec: VecEnv = make_vec_env(thunks, cfg.workers)
+    vec: VecEnv = make_vec_env(thunks, cfg.workers, parts=2 if cfg.pipeline else 1)
     stats = run_dir / "vecnormalize.pkl"
     if cfg.resume is not None and stats.is_file():
         vec = VecNormalize.load(str(stats), vec)
@@ -393,7 +401,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     n_eval = max(1, min(cfg.eval_episodes, 10))
     eval_envs = [make_env(cfg, s, max_steps=max_eval)() for s in seeds.envs("validation", n_eval)]
     if cfg.resume is not None:
-        model = PPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
+        model = PipelinedPPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
     else:
         model = build_model(cfg, vec)
     model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))

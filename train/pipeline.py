@@ -1,0 +1,188 @@
+"""PPO whose rollout collection overlaps the policy's forward passes with the physics.
+
+SB3 collects a rollout step by step: the training process computes the actions and
+values of all envs, then waits while the workers step them. On two cores that leaves the
+workers idle during every forward pass (about 2 ms for the thesis' two 4 x 512 networks
+on 16 observations) and the training process idle during the physics.
+:class:`PipelinedPPO` changes two things, neither of which changes what is computed:
+
+- it splits the envs into parts (``ChunkedVecEnv(parts=2)``) and keeps the workers busy:
+  while they step part A, the training process post-processes part B's last step and
+  computes B's next actions, and B's step is queued behind A's;
+- it runs only the actor during the rollout; the critic's values ``V(s_t)``, the final
+  ``V(s_T)`` and the timeout bootstraps are computed at the end in one batch (the policy
+  does not change during a rollout), where a large matrix product is far cheaper per
+  observation than 384 small ones.
+
+Each env still gets its action from its own latest observation and the same policy, and
+the actions are sampled in the same order as SB3's (part A's envs, then part B's, step by
+step), so with a frozen ``VecNormalize`` (or none) the rollout buffer equals SB3's
+``collect_rollouts`` over the same envs: bit for bit, except the values, which agree to
+float rounding (batched products round differently; ``tests/test_vec.py``). Torch's
+Gaussian sampler fills blocks of 16, so the same draws need each part's action count
+(envs x 12) to be a multiple of 16, as with 16 envs in 2 parts. With a training
+``VecNormalize`` the running statistics are updated part by part, so part A's
+observations are normalised with statistics that lack part B's newest 8 samples: the
+same estimator, updated in a different order.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3 import PPO
+from stable_baselines3.common.buffers import RolloutBuffer
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.utils import obs_as_tensor
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from train.vec import ChunkedVecEnv
+
+__all__ = ["PipelinedPPO"]
+
+
+def _pipeline(env: VecEnv) -> tuple[ChunkedVecEnv, VecNormalize | None] | None:
+    """(stepper, normaliser) when ``env`` is a ChunkedVecEnv with >= 2 parts, optionally
+    under one VecNormalize; else None (plain SB3 collection)."""
+    norm = env if isinstance(env, VecNormalize) else None
+    inner = env.venv if norm is not None else env
+    if isinstance(inner, ChunkedVecEnv) and len(inner.parts) >= 2:
+        return inner, norm
+    return None
+
+
+class PipelinedPPO(PPO):
+    """SB3 PPO with pipelined rollout collection over a ``ChunkedVecEnv`` with >= 2 parts
+    (module doc); any other env (or gSDE) falls back to SB3's ``collect_rollouts``."""
+
+    def collect_rollouts(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: RolloutBuffer,
+        n_rollout_steps: int,
+    ) -> bool:
+        pipe = _pipeline(env)
+        if pipe is None or self.use_sde or not isinstance(self.action_space, spaces.Box):
+            return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
+        venv, norm = pipe
+        assert self._last_obs is not None, "No previous observation was provided"
+        self.policy.set_training_mode(False)
+        rollout_buffer.reset()
+        callback.on_rollout_start()
+        parts = venv.parts
+        n_envs = env.num_envs
+        low, high = self.action_space.low, self.action_space.high
+
+        def act(p: int, obs: np.ndarray) -> tuple[np.ndarray, th.Tensor]:
+            """Sampled actions and their log-probabilities for part ``p`` (the actor only:
+            values are computed for the whole rollout at the end, in one batch)."""
+            x = obs_as_tensor(obs[parts[p].start : parts[p].stop], self.device)
+            with th.no_grad():
+                features = self.policy.extract_features(x, self.policy.pi_features_extractor)
+                latent = self.policy.mlp_extractor.forward_actor(features)
+                dist = self.policy._get_action_dist_from_latent(latent)
+                a = dist.get_actions(deterministic=False)
+                lp = dist.log_prob(a)
+            return a.cpu().numpy().reshape((-1, *self.action_space.shape)), lp
+
+        def post(p: int, result: tuple) -> tuple:
+            """VecNormalize.step_wait for one part's results."""
+            obs, rews, dones, infos = result
+            if norm is None:
+                return obs, rews, dones, infos
+            sl = slice(parts[p].start, parts[p].stop)
+            if norm.old_obs is None or len(norm.old_obs) != n_envs:
+                norm.old_obs = np.zeros((n_envs, *obs.shape[1:]), dtype=obs.dtype)
+            if norm.old_reward is None or len(norm.old_reward) != n_envs:
+                norm.old_reward = np.zeros(n_envs, dtype=rews.dtype)
+            norm.old_obs[sl] = obs  # the raw data, as VecNormalize.step_wait keeps them
+            norm.old_reward[sl] = rews
+            if norm.training and norm.norm_obs:
+                norm.obs_rms.update(obs)
+            obs = norm.normalize_obs(obs)
+            if norm.training:
+                ret = norm.returns[sl] * norm.gamma + rews
+                norm.returns[sl] = ret
+                norm.ret_rms.update(ret)
+            rews = norm.normalize_reward(rews)
+            for i, done in enumerate(dones):
+                if done and "terminal_observation" in infos[i]:
+                    infos[i]["terminal_observation"] = norm.normalize_obs(
+                        infos[i]["terminal_observation"]
+                    )
+            norm.returns[sl][dones] = 0
+            return obs, rews, dones, infos
+
+        obs = self._last_obs
+        pending: list[tuple[np.ndarray, th.Tensor]] = []
+        truncated: list[tuple[int, int, np.ndarray]] = []  # (step, env, terminal obs)
+        zeros = th.zeros(n_envs)
+        for p in range(len(parts)):  # prologue: every part's first step queued
+            pending.append(act(p, obs))
+            venv.step_part_async(p, np.clip(pending[p][0], low, high))
+        n_steps = 0
+        new_obs = np.empty_like(obs)
+        while n_steps < n_rollout_steps:
+            rewards = np.empty(n_envs, dtype=np.float32)
+            dones = np.empty(n_envs, dtype=bool)
+            infos: list[dict[str, Any]] = [{}] * n_envs
+            current = pending
+            pending = []
+            last = n_steps + 1 >= n_rollout_steps
+            for p, part in enumerate(parts):
+                o, r, d, inf = post(p, venv.step_part_wait())
+                new_obs[part.start : part.stop] = o
+                rewards[part.start : part.stop] = r
+                dones[part.start : part.stop] = d
+                infos[part.start : part.stop] = inf
+                if not last:  # part p's next step, queued behind the other parts'
+                    pending.append(act(p, new_obs))
+                    venv.step_part_async(p, np.clip(pending[p][0], low, high))
+            actions = np.concatenate([c[0] for c in current])
+            log_probs = th.cat([c[1] for c in current])
+            clipped_actions = np.clip(actions, low, high)
+            self.num_timesteps += n_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                while venv._pending:
+                    venv.step_part_wait()
+                return False
+            self._update_info_buffer(infos, dones)
+            n_steps += 1
+            for idx, done in enumerate(dones):  # timeouts: bootstrapped after the loop
+                if (
+                    done
+                    and infos[idx].get("terminal_observation") is not None
+                    and infos[idx].get("TimeLimit.truncated", False)
+                ):
+                    truncated.append((n_steps - 1, idx, infos[idx]["terminal_observation"]))
+            rollout_buffer.add(
+                self._last_obs,  # type: ignore[arg-type]
+                actions,
+                rewards,
+                self._last_episode_starts,  # type: ignore[arg-type]
+                zeros,  # values: filled in below
+                log_probs,
+            )
+            self._last_obs = new_obs.copy()
+            self._last_episode_starts = dones
+            obs = self._last_obs
+        buf = rollout_buffer
+        with th.no_grad():  # the critic on the whole rollout at once: V(s_t), V(s_T), timeouts
+            flat = buf.observations.reshape(-1, *buf.obs_shape)
+            v = self.policy.predict_values(obs_as_tensor(flat, self.device))
+            buf.values[:] = v.cpu().numpy().reshape(buf.values.shape)
+            values = self.policy.predict_values(obs_as_tensor(self._last_obs, self.device))
+            if truncated:
+                term = np.stack([t[2] for t in truncated])
+                tv = self.policy.predict_values(obs_as_tensor(term, self.device)).cpu().numpy()
+                for (step, idx, _), value in zip(truncated, tv[:, 0], strict=True):
+                    buf.rewards[step, idx] += self.gamma * value
+        rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
