@@ -271,6 +271,7 @@ def load_scene(
     preload: ArrayLike | None = None,
     *,
     settle_grasp: bool = True,
+    nonbackdrivable: bool = False,
     **settle_kwargs: float,
 ) -> tuple[mujoco.MjModel, mujoco.MjData]:
     """Load scene ``name`` and settle its grasp.
@@ -282,6 +283,11 @@ def load_scene(
         (N m for joint motors and servos, N for tendons). Default: the scene's
         ``ihm_preload``.
     settle_grasp : if False, return the ``init`` keyframe without simulating.
+    nonbackdrivable : after settling, put a :class:`ihm.ratchet.Ratchet` on every joint
+        driven by a plain motor (the Barrett fingers' worm gears): the stops sit at the
+        settled pose and follow the joints as they close when the ratchet's ``update`` or
+        ``step`` is used. The ratchet is ``ihm.scenes.last_ratchet``. Tendon transmissions
+        are not covered yet (:class:`SceneError`).
     settle_kwargs : passed to :func:`settle` (``vtol``, ``hold_s``, ...).
 
     Returns
@@ -289,7 +295,7 @@ def load_scene(
     (model, data) with ``data`` at rest; ``data.ctrl`` holds the commands and
     the settle report is in ``ihm.scenes.last_settle``.
     """
-    global last_settle
+    global last_settle, last_ratchet
     path = scene_path(name)
     try:
         model = mujoco.MjModel.from_xml_path(str(path))
@@ -312,7 +318,18 @@ def load_scene(
     else:
         data.ctrl[:] = 0.0
         mujoco.mj_forward(model, data)
+    last_ratchet = None
+    if nonbackdrivable:
+        from .ratchet import Ratchet, actuated_joints
+
+        if any(model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT for a in range(model.nu)):
+            raise SceneError(
+                f"scene {name!r}: nonbackdrivable covers joint motors only, not tendon "
+                "transmissions (yet)"
+            )
+        last_ratchet = Ratchet(model, data, actuated_joints(model))
     return model, data
 
 
 last_settle: SettleInfo | None = None
+last_ratchet = None  # the Ratchet of the last load_scene(..., nonbackdrivable=True)

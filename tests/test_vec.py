@@ -106,6 +106,8 @@ def test_part_steps_queue_like_dummy() -> None:
             b.step_part_async(1, act[2:])  # queued behind part 0's step
             with pytest.raises(RuntimeError, match="pending"):
                 b.step_async(act)
+            with pytest.raises(RuntimeError, match="pending"):
+                b.get_attr("dt")
             o0, r0, d0, _ = b.step_part_wait()
             o1, r1, d1, _ = b.step_part_wait()
             np.testing.assert_array_equal(oa, np.concatenate([o0, o1]))
@@ -118,7 +120,9 @@ def test_part_steps_queue_like_dummy() -> None:
     assert all(not p.is_alive() for p in b.processes)
 
 
-def _rollout(pipelined: bool, training: bool) -> tuple[dict[str, np.ndarray], VecNormalize]:
+def _rollout(
+    pipelined: bool, training: bool, norm_obs: bool = True
+) -> tuple[dict[str, np.ndarray], VecNormalize]:
     """One 12-step rollout of 8 rotation envs (8-step episodes: timeouts bootstrap), small
     nets, same initial weights and sampling seed: SB3's PPO on DummyVecEnv or PipelinedPPO on
     ChunkedVecEnv(parts=2)."""
@@ -126,7 +130,11 @@ def _rollout(pipelined: bool, training: bool) -> tuple[dict[str, np.ndarray], Ve
     thunks = [rotate.make_env(cfg, s) for s in RunSeeds(3).envs("train", 8)]
     venv = ChunkedVecEnv(thunks, n_workers=2, parts=2) if pipelined else DummyVecEnv(thunks)
     venv.seed(5)
-    vec = VecNormalize(venv, training=training)
+    vec = VecNormalize(venv, training=training, norm_obs=norm_obs)
+    if norm_obs:  # statistics far from the identity
+        vec.obs_rms.mean[:] = np.linspace(-0.1, 0.1, 56)
+        vec.obs_rms.var[:] = np.linspace(0.5, 4.0, 56)
+    vec.ret_rms.var = np.float64(3.0)
     torch.manual_seed(0)
     cls = PipelinedPPO if pipelined else PPO
     net = {"net_arch": {"pi": [32, 32], "vf": [32, 32]}}
@@ -141,6 +149,9 @@ def _rollout(pipelined: bool, training: bool) -> tuple[dict[str, np.ndarray], Ve
     out = {k: getattr(b, k).copy() for k in keys}
     out["returns"] = b.returns.copy()
     out["last_obs"] = np.asarray(model._last_obs).copy()
+    out["vec_returns"] = vec.returns.copy()
+    out["old_reward"] = np.asarray(vec.old_reward).copy()
+    out["old_obs"] = np.asarray(vec.old_obs).copy()
     vec.close()
     return out, vec
 
@@ -155,10 +166,20 @@ def test_pipelined_ppo_collects_what_sb3_collects() -> None:
     sync, _ = _rollout(False, training=False)
     pipe, _ = _rollout(True, training=False)
     assert sync["episode_starts"][1:].sum() >= 8  # every env timed out and restarted
-    for k in ("observations", "actions", "episode_starts", "log_probs", "last_obs"):
+    for k in ("observations", "actions", "episode_starts", "log_probs", "last_obs", "old_obs"):
         np.testing.assert_array_equal(sync[k], pipe[k], err_msg=k)
     for k in ("rewards", "values", "returns"):
         np.testing.assert_allclose(sync[k], pipe[k], rtol=0, atol=1e-5, err_msg=k)
+    # reward statistics updated part by part (observations not normalised: same actions)
+    sync_r, vrs = _rollout(False, training=True, norm_obs=False)
+    pipe_r, vrp = _rollout(True, training=True, norm_obs=False)
+    for k in ("observations", "actions", "episode_starts", "vec_returns", "old_reward"):
+        np.testing.assert_array_equal(sync_r[k], pipe_r[k], err_msg=k)
+    assert vrs.ret_rms.count == vrp.ret_rms.count
+    np.testing.assert_allclose(vrs.ret_rms.var, vrp.ret_rms.var, rtol=1e-9)
+    # part B's rewards are normalised after the whole step's update, as in SB3; part A's
+    # before part B's newest returns arrive (a slightly different scale)
+    np.testing.assert_allclose(sync_r["rewards"][:, 4:], pipe_r["rewards"][:, 4:], atol=1e-5)
     sync_t, vs = _rollout(False, training=True)
     pipe_t, vp = _rollout(True, training=True)
     np.testing.assert_array_equal(sync_t["observations"][0], pipe_t["observations"][0])

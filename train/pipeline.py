@@ -22,8 +22,9 @@ float rounding (batched products round differently; ``tests/test_vec.py``). Torc
 Gaussian sampler fills blocks of 16, so the same draws need each part's action count
 (envs x 12) to be a multiple of 16, as with 16 envs in 2 parts. With a training
 ``VecNormalize`` the running statistics are updated part by part, so part A's
-observations are normalised with statistics that lack part B's newest 8 samples: the
-same estimator, updated in a different order.
+observations and rewards are normalised with statistics that lack part B's newest
+samples: the same estimators, updated in a different order (tested: same counts, the
+same reward statistics and returns when observations are not normalised).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
@@ -46,7 +48,10 @@ __all__ = ["PipelinedPPO"]
 
 def _pipeline(env: VecEnv) -> tuple[ChunkedVecEnv, VecNormalize | None] | None:
     """(stepper, normaliser) when ``env`` is a ChunkedVecEnv with >= 2 parts, optionally
-    under one VecNormalize; else None (plain SB3 collection)."""
+    under one plain VecNormalize (not a subclass: its step_wait is re-done part by part);
+    else None (plain SB3 collection)."""
+    if isinstance(env, VecNormalize) and type(env) is not VecNormalize:
+        return None
     norm = env if isinstance(env, VecNormalize) else None
     inner = env.venv if norm is not None else env
     if isinstance(inner, ChunkedVecEnv) and len(inner.parts) >= 2:
@@ -56,7 +61,8 @@ def _pipeline(env: VecEnv) -> tuple[ChunkedVecEnv, VecNormalize | None] | None:
 
 class PipelinedPPO(PPO):
     """SB3 PPO with pipelined rollout collection over a ``ChunkedVecEnv`` with >= 2 parts
-    (module doc); any other env (or gSDE) falls back to SB3's ``collect_rollouts``."""
+    (module doc); any other env, gSDE, squashed or non-Box actions and non-Box
+    observations fall back to SB3's ``collect_rollouts``."""
 
     def collect_rollouts(
         self,
@@ -66,7 +72,13 @@ class PipelinedPPO(PPO):
         n_rollout_steps: int,
     ) -> bool:
         pipe = _pipeline(env)
-        if pipe is None or self.use_sde or not isinstance(self.action_space, spaces.Box):
+        if (
+            pipe is None
+            or self.use_sde
+            or self.policy.squash_output
+            or not isinstance(self.action_space, spaces.Box)
+            or not isinstance(self.observation_space, spaces.Box)
+        ):
             return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
         venv, norm = pipe
         assert self._last_obs is not None, "No previous observation was provided"
@@ -82,7 +94,9 @@ class PipelinedPPO(PPO):
             values are computed for the whole rollout at the end, in one batch)."""
             x = obs_as_tensor(obs[parts[p].start : parts[p].stop], self.device)
             with th.no_grad():
-                features = self.policy.extract_features(x, self.policy.pi_features_extractor)
+                features = BasePolicy.extract_features(
+                    self.policy, x, self.policy.pi_features_extractor
+                )
                 latent = self.policy.mlp_extractor.forward_actor(features)
                 dist = self.policy._get_action_dist_from_latent(latent)
                 a = dist.get_actions(deterministic=False)
@@ -125,8 +139,9 @@ class PipelinedPPO(PPO):
             pending.append(act(p, obs))
             venv.step_part_async(p, np.clip(pending[p][0], low, high))
         n_steps = 0
-        new_obs = np.empty_like(obs)
         while n_steps < n_rollout_steps:
+            new_obs = np.empty_like(obs)
+            values = None  # computed after the loop (SB3 sets them per step)
             rewards = np.empty(n_envs, dtype=np.float32)
             dones = np.empty(n_envs, dtype=bool)
             infos: list[dict[str, Any]] = [{}] * n_envs
@@ -148,8 +163,11 @@ class PipelinedPPO(PPO):
             self.num_timesteps += n_envs
             callback.update_locals(locals())
             if not callback.on_step():
-                while venv._pending:
-                    venv.step_part_wait()
+                # stop: collect the queued steps so that the normaliser sees them; the envs
+                # are then two steps ahead of _last_obs (SB3: one), which only matters if
+                # learn() went on after a callback stopped it
+                for p in range(len(pending)):
+                    post(p, venv.step_part_wait())
                 return False
             self._update_info_buffer(infos, dones)
             n_steps += 1
@@ -168,9 +186,9 @@ class PipelinedPPO(PPO):
                 zeros,  # values: filled in below
                 log_probs,
             )
-            self._last_obs = new_obs.copy()
+            self._last_obs = new_obs
             self._last_episode_starts = dones
-            obs = self._last_obs
+            obs = new_obs
         buf = rollout_buffer
         with th.no_grad():  # the critic on the whole rollout at once: V(s_t), V(s_T), timeouts
             flat = buf.observations.reshape(-1, *buf.obs_shape)

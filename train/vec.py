@@ -167,6 +167,11 @@ class ChunkedVecEnv(VecEnv):
         act_space = self.remotes[0].recv()[0]
         super().__init__(len(env_fns), obs_space, act_space)
 
+    def _idle(self, what: str) -> None:
+        """Raise unless no part step is queued: a reply would be read as a step result."""
+        if self._pending:
+            raise RuntimeError(f"{what} with part steps pending: collect them first")
+
     def _global(self, results: list[tuple]) -> tuple:
         """Workers' concatenated results in global env order."""
         obs = np.concatenate([r[0] for r in results])
@@ -182,8 +187,7 @@ class ChunkedVecEnv(VecEnv):
 
     # -- stepping --------------------------------------------------------------------------
     def step_async(self, actions: np.ndarray) -> None:
-        if self._pending:
-            raise RuntimeError("step_async with part steps pending: collect them first")
+        self._idle("step_async")
         for remote, chunk in zip(self.remotes, self.chunks, strict=True):
             remote.send(("step", actions[chunk]))
         self.waiting = True
@@ -220,6 +224,7 @@ class ChunkedVecEnv(VecEnv):
         )
 
     def reset(self) -> VecEnvObs:
+        self._idle("reset")
         for remote, chunk in zip(self.remotes, self.chunks, strict=True):
             seeds = [self._seeds[i] for i in chunk]
             options = [self._options[i] for i in chunk]
@@ -249,6 +254,7 @@ class ChunkedVecEnv(VecEnv):
         self.closed = True
 
     def get_images(self) -> Sequence[np.ndarray | None]:
+        self._idle("get_images")
         for remote in self.remotes:
             remote.send(("render", None))
         imgs = [img for remote in self.remotes for img in remote.recv()]
@@ -270,6 +276,7 @@ class ChunkedVecEnv(VecEnv):
 
     def _gather(self, cmd: str, make: Callable[[list[int]], Any], indices: VecEnvIndices) -> list:
         """Results in the order of ``indices``."""
+        self._idle(cmd)
         routes = self._route(indices)
         for w, local, _ in routes:
             self.remotes[w].send((cmd, make(local)))
@@ -282,6 +289,7 @@ class ChunkedVecEnv(VecEnv):
         return self._gather("get_attr", lambda loc: (attr_name, loc), indices)
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        self._idle("set_attr")
         for w, local, _ in self._route(indices):
             self.remotes[w].send(("set_attr", (attr_name, value, local)))
             self.remotes[w].recv()
