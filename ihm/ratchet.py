@@ -1,4 +1,4 @@
-"""Nonbackdrivable joints in simulation: a ratchet made of a joint limit that follows the joint.
+"""Nonbackdrivable joints and transmissions in simulation: a limit that follows the joint.
 
 A real Barrett BH-280 finger is driven through a worm gear: the motor can close it, an
 external load cannot open it (thesis sec. 5, "passive reactions"). MuJoCo's motors are
@@ -32,7 +32,16 @@ from numpy.typing import NDArray
 
 from stability import GraspError
 
-__all__ = ["Ratchet", "RatchetError", "actuated_joints"]
+__all__ = ["Ratchet", "RatchetError", "actuated_joints", "actuated_tendons"]
+
+
+def actuated_tendons(model: mujoco.MjModel) -> list[int]:
+    """Tendon ids driven by a tendon-transmission actuator (the tendon gripper's)."""
+    return [
+        int(model.actuator_trnid[a, 0])
+        for a in range(model.nu)
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_TENDON
+    ]
 
 
 class RatchetError(GraspError):
@@ -52,15 +61,30 @@ def actuated_joints(model: mujoco.MjModel, kind: str = "motor") -> list[int]:
     return out
 
 
+_FIELDS = {  # kind: model arrays (limited, range, solref, solimp, margin)
+    "joint": ("jnt_limited", "jnt_range", "jnt_solref", "jnt_solimp", "jnt_margin"),
+    "tendon": (
+        "tendon_limited",
+        "tendon_range",
+        "tendon_solref_lim",
+        "tendon_solimp_lim",
+        "tendon_margin",
+    ),
+}
+
+
 class Ratchet:
-    """One-sided joint limits that follow the joints in their closing direction.
+    """One-sided limits on joints and tendons that follow them in their closing direction.
 
     Parameters
     ----------
-    model, data : the simulation (the model's limits of ``joints`` are changed in place;
-        :meth:`release` restores them).
+    model, data : the simulation (the model's limits are changed in place; :meth:`release`
+        restores them).
     joints : joint ids or names (hinge or slide joints).
-    sign : +1 (default): closing = increasing joint position; -1: decreasing.
+    tendons : tendon ids or names (a nonbackdrivable transmission: the tendon length, e.g.
+        the tendon gripper's ``R^T q``, cannot decrease). A tendon's stop follows
+        ``data.ten_length``, which ``mj_step`` computes before it integrates: one step late.
+    sign : +1 (default): closing = increasing joint position / tendon length; -1: decreasing.
     timeconst : limit stiffness time constant [s]; default ``2 * model.opt.timestep``.
     """
 
@@ -68,63 +92,74 @@ class Ratchet:
         self,
         model: mujoco.MjModel,
         data: mujoco.MjData,
-        joints: Sequence[int | str],
+        joints: Sequence[int | str] = (),
         *,
+        tendons: Sequence[int | str] = (),
         sign: int = 1,
         timeconst: float | None = None,
     ) -> None:
         if sign not in (1, -1):
             raise RatchetError(f"sign must be +1 or -1, got {sign!r}")
-        ids = []
-        for j in joints:
-            jid = (
-                mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-                if isinstance(j, str)
-                else int(j)
-            )
-            if not 0 <= jid < model.njnt:
-                raise RatchetError(f"unknown joint {j!r}")
-            hinge_or_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+        jids = [self._id(model, mujoco.mjtObj.mjOBJ_JOINT, j, model.njnt, "joint") for j in joints]
+        hinge_or_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+        for jid in jids:
             if int(model.jnt_type[jid]) not in hinge_or_slide:
                 raise RatchetError(f"joint {model.joint(jid).name!r} is not a hinge or slide joint")
-            ids.append(jid)
-        if not ids:
-            raise RatchetError("a ratchet needs at least one joint")
+        tids = [
+            self._id(model, mujoco.mjtObj.mjOBJ_TENDON, t, model.ntendon, "tendon") for t in tendons
+        ]
+        if not jids and not tids:
+            raise RatchetError("a ratchet needs at least one joint or tendon")
         self.model, self.data, self.sign = model, data, sign
-        self.joints = np.array(ids)
+        self.joints, self.tendons = np.array(jids, dtype=int), np.array(tids, dtype=int)
         self.qadr = model.jnt_qposadr[self.joints]
-        self._saved = (
-            model.jnt_limited[self.joints].copy(),
-            model.jnt_range[self.joints].copy(),
-            model.jnt_solref[self.joints].copy(),
-            model.jnt_solimp[self.joints].copy(),
-            model.jnt_margin[self.joints].copy(),
-        )
+        self._ids = {"joint": self.joints, "tendon": self.tendons}
+        self._saved = {
+            kind: [getattr(model, f)[ids].copy() for f in _FIELDS[kind]]
+            for kind, ids in self._ids.items()
+        }
         tc = 2.0 * model.opt.timestep if timeconst is None else float(timeconst)
-        model.jnt_limited[self.joints] = 1
-        model.jnt_solref[self.joints] = [tc, 1.0]
-        model.jnt_solimp[self.joints] = [0.99, 0.999, 0.001, 0.5, 2.0]
-        model.jnt_margin[self.joints] = 0.0
         big = 1e6
-        for k, j in enumerate(self.joints):
-            q = float(data.qpos[self.qadr[k]])
-            model.jnt_range[j] = [q, big] if sign > 0 else [-big, q]
-        self.update()
+        for kind, ids in self._ids.items():
+            limited, rng, solref, solimp, margin = (getattr(model, f) for f in _FIELDS[kind])
+            limited[ids] = 1
+            solref[ids] = [tc, 1.0]
+            solimp[ids] = [0.99, 0.999, 0.001, 0.5, 2.0]
+            margin[ids] = 0.0
+            pos = self._positions(kind)
+            for k, i in enumerate(ids):
+                rng[i] = [pos[k], big] if sign > 0 else [-big, pos[k]]
+
+    @staticmethod
+    def _id(model: mujoco.MjModel, obj: mujoco.mjtObj, x: int | str, n: int, what: str) -> int:
+        i = mujoco.mj_name2id(model, obj, x) if isinstance(x, str) else int(x)
+        if not 0 <= i < n:
+            raise RatchetError(f"unknown {what} {x!r}")
+        return i
+
+    def _positions(self, kind: str) -> NDArray[np.float64]:
+        if kind == "joint":
+            return self.data.qpos[self.qadr]
+        return self.data.ten_length[self.tendons]
 
     @property
     def stops(self) -> NDArray[np.float64]:
-        """Current stop positions (the limit each joint cannot open past) [rad or m]."""
+        """Current stops, joints then tendons (the positions they cannot open past)."""
         col = 0 if self.sign > 0 else 1
-        return self.model.jnt_range[self.joints, col].copy()
+        m = self.model
+        return np.concatenate([m.jnt_range[self.joints, col], m.tendon_range[self.tendons, col]])
 
     def update(self) -> None:
-        """Move each stop to the joint's position where the joint has closed past it."""
-        q = self.data.qpos[self.qadr]
-        r = self.model.jnt_range
-        if self.sign > 0:
-            r[self.joints, 0] = np.maximum(r[self.joints, 0], q)
-        else:
-            r[self.joints, 1] = np.minimum(r[self.joints, 1], q)
+        """Move each stop to its joint's (tendon's) position where it has closed past it."""
+        for kind, ids in self._ids.items():
+            if len(ids) == 0:
+                continue
+            r = getattr(self.model, _FIELDS[kind][1])
+            pos = self._positions(kind)
+            if self.sign > 0:
+                r[ids, 0] = np.maximum(r[ids, 0], pos)
+            else:
+                r[ids, 1] = np.minimum(r[ids, 1], pos)
 
     def step(self, nstep: int = 1) -> None:
         """``nstep`` physics steps, the stops updated after each."""
@@ -133,9 +168,7 @@ class Ratchet:
             self.update()
 
     def release(self) -> None:
-        """Restore the joints' own limits (the ratchet is then inactive)."""
-        lim, rng, ref, imp, mar = self._saved
-        m = self.model
-        m.jnt_limited[self.joints], m.jnt_range[self.joints] = lim, rng
-        m.jnt_solref[self.joints], m.jnt_solimp[self.joints] = ref, imp
-        m.jnt_margin[self.joints] = mar
+        """Restore the joints' and tendons' own limits (the ratchet is then inactive)."""
+        for kind, ids in self._ids.items():
+            for f, saved in zip(_FIELDS[kind], self._saved[kind], strict=True):
+                getattr(self.model, f)[ids] = saved

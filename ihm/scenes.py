@@ -284,10 +284,10 @@ def load_scene(
         ``ihm_preload``.
     settle_grasp : if False, return the ``init`` keyframe without simulating.
     nonbackdrivable : after settling, put a :class:`ihm.ratchet.Ratchet` on every joint
-        driven by a plain motor (the Barrett fingers' worm gears): the stops sit at the
-        settled pose and follow the joints as they close when the ratchet's ``update`` or
-        ``step`` is used. The ratchet is ``ihm.scenes.last_ratchet``. Tendon transmissions
-        are not covered yet (:class:`SceneError`).
+        driven by a plain motor (the Barrett fingers' worm gears) and every actuated tendon
+        (the tendon gripper's transmission): the stops sit at the settled pose and follow
+        as the fingers close when the ratchet's ``update`` or ``step`` is used. The
+        ratchet is ``ihm.scenes.last_ratchet``.
     settle_kwargs : passed to :func:`settle` (``vtol``, ``hold_s``, ...).
 
     Returns
@@ -320,14 +320,9 @@ def load_scene(
         mujoco.mj_forward(model, data)
     last_ratchet = None
     if nonbackdrivable:
-        from .ratchet import Ratchet, actuated_joints
+        from .ratchet import Ratchet, actuated_joints, actuated_tendons
 
-        if any(model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT for a in range(model.nu)):
-            raise SceneError(
-                f"scene {name!r}: nonbackdrivable covers joint motors only, not tendon "
-                "transmissions (yet)"
-            )
-        last_ratchet = Ratchet(model, data, actuated_joints(model))
+        last_ratchet = Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
     return model, data
 
 

@@ -101,3 +101,27 @@ def test_bad_input() -> None:
         Ratchet(m, d, ["object"])
     with pytest.raises(RatchetError, match="sign"):
         Ratchet(m, d, ["f1"], sign=2)
+
+
+def test_load_scene_nonbackdrivable_tendon_transmission() -> None:
+    """tendon_box with its tendons slack (ctrl 0): the motors let the fingers open and the
+    tendons lengthen back by about 1e-3 m in 0.5 s; with the ratcheted transmission the
+    tendon lengths hold within the limit's softness."""
+    import ihm
+    import ihm.scenes as scenes
+
+    for nb in (False, True):
+        m, d = ihm.load_scene("tendon_box", nonbackdrivable=nb)
+        r = scenes.last_ratchet
+        assert (r is not None) == nb
+        length = d.ten_length.copy()
+        d.ctrl[:] = 0.0
+        if r is None:
+            mujoco.mj_step(m, d, nstep=500)
+            assert (length - d.ten_length).max() > 5e-4
+        else:
+            assert len(r.tendons) == 2 and len(r.joints) == 0
+            r.step(500)
+            assert (length - d.ten_length).max() < 2e-5
+            r.release()
+            assert not m.tendon_limited[r.tendons].any()
