@@ -6,6 +6,7 @@ Examples::
     python -m ihm show barrett_box                      # table + barrett_box.png
     python -m ihm show barrett_box --out box.png --rrd box.rrd
     python -m ihm show barrett_box --preload 0.3 0.3 0.3 0
+    python -m ihm map barrett_box --plane xy --workers 2 --nonbackdrivable
 
 Errors (unknown scene, wrong preload length, a grasp that does not settle,
 no OpenGL context) print one line to stderr and exit with status 2.
@@ -86,6 +87,40 @@ def _parser() -> argparse.ArgumentParser:
         metavar="M_PER_N",
         help="arrow length per newton [m/N] (default: largest force 0.8 object radii long)",
     )
+    mp_ = sub.add_parser(
+        "map",
+        help="resistible force per direction in a plane, simulated in MuJoCo (CSV + polar PNG)",
+        description="Settle SCENE with the given commands, then per direction in PLANE (world "
+        "axes, 1-degree spacing by default) ramp a force on the object until it moves 2 mm "
+        "(ihm.resistance): the largest force held, capped at --cap. Several --preload sets "
+        "are overlaid on one chart. Writes OUT/SCENE_PLANE.csv and .png.",
+    )
+    mp_.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    mp_.add_argument("--plane", default="xy", help="two force axes, e.g. xy, xz, yz (default xy)")
+    mp_.add_argument(
+        "--method",
+        default="sim",
+        help="'sim' (MuJoCo); the stability methods need a base load for gravity (not yet)",
+    )
+    mp_.add_argument("--directions", type=int, default=360, help="directions (default 360)")
+    mp_.add_argument(
+        "--preload",
+        type=float,
+        nargs="+",
+        action="append",
+        metavar="F",
+        help="commanded actuator forces (one per actuator); repeat for several maps; "
+        "default: the scene's ihm_preload",
+    )
+    mp_.add_argument(
+        "--nonbackdrivable",
+        action="store_true",
+        help="ratchet the motor joints and actuated tendons (ihm.ratchet)",
+    )
+    mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
+    mp_.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    mp_.add_argument("--out", type=Path, default=Path("."), help="output folder (default .)")
+    mp_.add_argument("--no-progress", action="store_true", help="no progress bar")
     show.add_argument(
         "--no-contacts",
         action="store_true",
@@ -169,6 +204,23 @@ def _cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_map(args: argparse.Namespace) -> int:
+    from .maps import MapError, _check, run
+
+    try:
+        _check(args.plane, args.method, args.directions, args.workers, args.cap)
+        preloads = args.preload or [None]
+        csv_path, png, walls = run(
+            args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
+            args.cap, args.workers, args.out, progress=not args.no_progress,
+        )  # fmt: skip
+    except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
+        print(f"{PROG} map: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {csv_path} and {png} ({', '.join(f'{w:.1f} s' for w in walls)} per map)")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (2 on a user-facing error)."""
     from .render import RenderError
@@ -177,6 +229,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "list":
         return _cmd_list()
+    if args.command == "map":
+        return _cmd_map(args)
     if args.width < 1 or args.height < 1:
         parser.error(f"--width and --height must be positive, got {args.width} x {args.height}")
     force_scale = getattr(args, "force_scale", None)

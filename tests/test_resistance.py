@@ -125,3 +125,44 @@ def test_load_scene_nonbackdrivable_tendon_transmission() -> None:
             assert (length - d.ten_length).max() < 2e-5
             r.release()
             assert not m.tendon_limited[r.tendons].any()
+
+
+def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
+    """``python -m ihm map`` on a coarse grid writes its CSV (one row per direction and
+    preload) and PNG; 2 workers give the numbers of 1; bad names exit 2 with a message."""
+    import csv
+    import os
+    import subprocess
+    import sys
+
+    from ihm.maps import simulated_map
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "MPLBACKEND": "Agg"}
+    args = ["barrett_box", "--directions", "4", "--cap", "3", "--no-progress"]
+    p = subprocess.run(
+        [sys.executable, "-m", "ihm", "map", *args, "--out", str(tmp_path), "--preload", "0",
+         "0.1", "0.1", "0.1", "--preload", "0", "0.3", "0.3", "0.3", "--workers", "2"],
+        cwd=root, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    rows = list(csv.DictReader((tmp_path / "barrett_box_xy.csv").open()))
+    assert len(rows) == 8 and {r["method"] for r in rows} == {"sim"}
+    forces = np.array([float(r["force_N"]) for r in rows]).reshape(2, 4)
+    assert np.all(forces > 0) and np.all(forces <= 3)
+    assert np.all(forces[1] >= forces[0])  # three times the grip holds at least as much
+    assert (tmp_path / "barrett_box_xy.png").stat().st_size > 10_000
+    one = simulated_map("barrett_box", "xy", 4, preload=[0, 0.1, 0.1, 0.1], cap=3,
+                        workers=1, progress=False)  # fmt: skip
+    np.testing.assert_array_equal(one.magnitudes, forces[0])
+    for bad, msg in (
+        (["nope"], "unknown scene"),
+        (["barrett_box", "--plane", "xq"], "plane"),
+        (["barrett_box", "--method", "planar"], "unknown method"),
+        (["barrett_box", "--preload", "1", "2"], "needs 4 actuator forces"),
+    ):
+        q = subprocess.run(
+            [sys.executable, "-m", "ihm", "map", *bad, "--no-progress"],
+            cwd=root, env=env, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert q.returncode == 2 and msg in q.stderr, (bad, q.stderr)
