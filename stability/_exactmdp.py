@@ -53,16 +53,21 @@ class QueryModel:
     objective: str | None = None
     weights: NDArray[np.float64] | None = None
     max_normal_force: float | None = None
+    base: NDArray[np.float64] | None = None  # MaxDisturbance: the wrench always applied
 
     @property
     def wrench_max(self) -> NDArray[np.float64]:
-        return self.wrench if self.direction is None else self.cap * self.direction
+        """Per component the largest magnitude the query's wrench takes."""
+        if self.direction is None:
+            return self.wrench
+        base = np.zeros_like(self.direction) if self.base is None else self.base
+        return np.maximum(np.abs(base), np.abs(base + self.cap * self.direction))
 
     @classmethod
     def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> QueryModel:
         if not isinstance(query, OptimalCommands):
             d = QueryData.of(grasp, query)
-            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand)
+            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand, base=d.base)
         if grasp.J is None:
             raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
         wrench = grasp.wrench(query.wrench)
@@ -115,7 +120,8 @@ def add_query(prob: ExactProblem, data: QueryModel) -> int | None:
     M = prob.model
     var = None
     if data.direction is not None:
-        var = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
+        base = 0.0 * data.direction if data.base is None else data.base
+        var = prob.add_object_equilibrium(base, data.direction, data.cap)
         M.set_objective([var], [1.0], maximize=True)
     else:
         prob.add_object_equilibrium(data.wrench)

@@ -15,7 +15,7 @@ from . import mip
 from .errors import GraspError
 from .exact import ExactBounds, ExactPoint, ExactProblem, hand_data
 from .grasp import Grasp
-from .queries import Existence, Query, checked_direction_cap
+from .queries import Existence, Query, checked_base, checked_direction_cap
 from .solution import Solution
 
 # the model_residuals keys every exact-model method enforces (not max_dissipation)
@@ -98,6 +98,7 @@ class QueryData:
     cap: float
     preload: NDArray[np.float64]
     hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+    base: NDArray[np.float64] | None = None  # MaxDisturbance: the wrench always applied
 
     @classmethod
     def of(cls, grasp: Grasp, query: Query) -> QueryData:
@@ -106,11 +107,15 @@ class QueryData:
         if isinstance(query, Existence):
             return cls(grasp.wrench(query.wrench), None, 0.0, preload, hand)
         d, cap = checked_direction_cap(grasp, query)
-        return cls(None, d, cap, preload, hand)
+        return cls(None, d, cap, preload, hand, checked_base(grasp, query))
 
     @property
     def wrench_max(self) -> NDArray[np.float64]:
-        return self.wrench if self.direction is None else self.cap * self.direction
+        """Per component the largest magnitude the query's wrench takes."""
+        if self.direction is None:
+            return self.wrench
+        base = np.zeros_like(self.direction) if self.base is None else self.base
+        return np.maximum(np.abs(base), np.abs(base + self.cap * self.direction))
 
 
 class Stop(Exception):

@@ -45,7 +45,7 @@ from ._lp import solve_lp
 from .api import register
 from .errors import GraspError, SolverError
 from .grasp import Grasp
-from .queries import Existence, MaxDisturbance, Query, checked_direction_cap
+from .queries import Existence, MaxDisturbance, Query, checked_base, checked_direction_cap
 from .solution import Solution
 
 __all__ = ["primitive_wrenches", "ferrari_canny", "force_closure", "solve_gws", "cone_edges"]
@@ -268,15 +268,16 @@ def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **options: object) -> 
         return Solution(True, "gws", grasp, query, forces=_forces(grasp, E, lam), stats=stats)
 
     d, cap = checked_direction_cap(grasp, query)
-    # variables x = (lam (K), s); rows: G E lam + s d = 0, sum lam <= 1
+    base = checked_base(grasp, query)
+    # variables x = (lam (K), s); rows: G E lam + s d = -base, sum lam <= 1
     A = np.zeros((wd + 1, K + 1))
     A[:wd, :K] = GE
     A[:wd, K] = d
     A[wd, :K] = 1.0
     cost = np.zeros(K + 1)
     cost[K] = -1.0
-    row_lower = np.concatenate([np.zeros(wd), [-np.inf]])
-    row_upper = np.concatenate([np.zeros(wd), [1.0]])
+    row_lower = np.concatenate([-base, [-np.inf]])
+    row_upper = np.concatenate([-base, [1.0]])
     x, iters = _solve_lp(
         cost,
         A,
@@ -286,8 +287,11 @@ def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **options: object) -> 
         col_upper=np.concatenate([np.full(K, np.inf), [cap]]),
     )
     stats["iterations"] = iters
-    if x is None:  # cannot happen: s = 0, c = 0 is feasible
-        raise SolverError("gws MaxDisturbance LP reported infeasible although s = 0 is feasible")
+    if x is None:
+        if not base.any():  # cannot happen: s = 0, c = 0 is feasible
+            raise SolverError("gws MaxDisturbance LP infeasible although s = 0 is feasible")
+        stats["capped"] = False  # the base alone is outside the grasp wrench space
+        return Solution(False, "gws", grasp, query, forces=None, stats=stats)
     s = float(min(max(x[K], 0.0), cap))
     stats["capped"] = bool(s >= cap * (1.0 - 1e-12))
     forces = _forces(grasp, E, x[:K])

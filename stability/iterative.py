@@ -206,13 +206,14 @@ def _bisect(sch, grasp, query, data, preload, stats, rtol) -> Solution:
     ``preload`` is the converged ``(problem, point, trace)`` of the commands alone, the
     answer for ``s = 0``."""
     cap, d = data.cap, data.direction
+    base = np.zeros_like(d) if data.base is None else data.base
     r_pre = preload[1].motion
     probes: list[dict[str, Any]] = []
     best: tuple[float, Any, Any, list] | None = None
 
     def probe(s: float) -> bool:
         nonlocal best
-        out, prob, pt, trace = sch.loop(s * d, r_pre)
+        out, prob, pt, trace = sch.loop(base + s * d, r_pre)
         probes.append({"s": s, "outcome": out, "iterations": len(trace)})
         if out == "not_converged":
             raise _NotConverged(s)
@@ -222,6 +223,10 @@ def _bisect(sch, grasp, query, data, preload, stats, rtol) -> Solution:
 
     stats["bisection"] = probes
     try:
+        if base.any() and not probe(0.0):  # the base load alone is not held
+            stats["capped"] = False
+            stats["reason"] = "the base load alone is not stable"
+            return solution("iterative", grasp, query, False, stats)
         if probe(cap):
             lo, hi = cap, cap
         else:

@@ -59,7 +59,8 @@ def _attempt(grasp, query, data, opts, bound_factor, stats) -> Solution:
     if data.direction is None:
         prob.add_object_equilibrium(data.wrench)
     else:
-        s = prob.add_object_equilibrium(0.0 * data.direction, data.direction, data.cap)
+        base = 0.0 * data.direction if data.base is None else data.base
+        s = prob.add_object_equilibrium(base, data.direction, data.cap)
         prob.model.set_objective([s], [1.0], maximize=True)
     try:
         pt = run(prob, opts, stats)

@@ -43,7 +43,7 @@ from ._lp import INF, solve_lp
 from .api import register
 from .errors import GraspError, MethodError
 from .grasp import Grasp, cross2
-from .queries import Existence, MaxDisturbance, checked_direction_cap
+from .queries import Existence, MaxDisturbance, checked_base, checked_direction_cap
 from .solution import Solution, model_residuals
 
 __all__ = [
@@ -712,7 +712,8 @@ def _solve_planar(
         sol = _existence(unit, query, p, w * scale, chunk)
     else:
         d, cap = checked_direction_cap(grasp, query)
-        sol = _max_disturbance(unit, query, p, d * scale, cap, chunk)
+        base = checked_base(grasp, query)
+        sol = _max_disturbance(unit, query, p, d * scale, cap, chunk, base * scale)
     sol.grasp = grasp
     if sol.motion is not None:
         sol.motion = sol.motion * scale  # theta = theta_unit / L
@@ -761,8 +762,8 @@ def _existence(grasp, query, p, w, chunk) -> Solution:
     )
 
 
-def _max_disturbance(grasp, query, p, d, cap, chunk) -> Solution:
-    ctx = _Ctx.make(grasp, p, np.zeros(3), d)
+def _max_disturbance(grasp, query, p, d, cap, chunk, base=None) -> Solution:
+    ctx = _Ctx.make(grasp, p, np.zeros(3) if base is None else base, d)
     pending: list[tuple[float, NDArray[np.int8], NDArray[np.bool_]]] = []
     best: tuple[float, Any] = (-1.0, None)
     n_states = n_lp = n_rejected = 0

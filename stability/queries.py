@@ -16,7 +16,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import GraspError
 
-__all__ = ["Existence", "MaxDisturbance", "OptimalCommands", "Query", "checked_direction_cap"]
+__all__ = [
+    "Existence",
+    "MaxDisturbance",
+    "OptimalCommands",
+    "Query",
+    "checked_base",
+    "checked_direction_cap",
+]
 
 
 @dataclass(frozen=True)
@@ -34,16 +41,20 @@ class Existence:
 
 @dataclass(frozen=True)
 class MaxDisturbance:
-    """Largest ``s >= 0`` such that ``w = s * direction`` is stable (``value``).
+    """Largest ``s >= 0`` such that ``w = base + s * direction`` is stable (``value``).
 
     ``cap`` bounds the search: a result equal to ``cap`` means "at least cap"
-    and is flagged ``stats["capped"] = True``.
+    and is flagged ``stats["capped"] = True``. ``base`` (default zero) is a wrench that is
+    always applied, in the grasp's wrench frame and units like ``direction``: e.g. the
+    object's weight (``ihm.contacts.SceneGrasp.gravity_wrench``). When ``base`` alone is
+    not stable the answer is unstable.
     """
 
     direction: ArrayLike
     preload: float | ArrayLike | None = None
     commands: ArrayLike | None = None
     cap: float = 1e3
+    base: ArrayLike | None = None
 
 
 @dataclass(frozen=True)
@@ -83,3 +94,10 @@ def checked_direction_cap(grasp, query: MaxDisturbance) -> tuple[NDArray[np.floa
     if not (np.isfinite(cap) and cap > 0):
         raise GraspError(f"MaxDisturbance cap must be finite and > 0, got {query.cap!r}")
     return d, cap
+
+
+def checked_base(grasp, query: MaxDisturbance) -> NDArray[np.float64]:
+    """The validated ``base`` wrench of a MaxDisturbance query (zeros when None)."""
+    if query.base is None:
+        return np.zeros(grasp.wrench_dim)
+    return grasp.wrench(query.base, "base")

@@ -153,7 +153,8 @@ class Solution:
         q = self.query
         if isinstance(q, MaxDisturbance):
             s = 0.0 if self.value is None else self.value
-            return s * np.asarray(q.direction, dtype=float)
+            w = s * np.asarray(q.direction, dtype=float)
+            return w if q.base is None else w + np.asarray(q.base, dtype=float)
         return np.asarray(q.wrench, dtype=float)
 
     def residuals(self) -> dict[str, float]:
