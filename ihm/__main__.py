@@ -89,18 +89,26 @@ def _parser() -> argparse.ArgumentParser:
     )
     mp_ = sub.add_parser(
         "map",
-        help="resistible force per direction in a plane, simulated in MuJoCo (CSV + polar PNG)",
+        help="resistible force per direction in a plane: MuJoCo and/or a stability method "
+        "(CSV + polar PNG)",
         description="Settle SCENE with the given commands, then per direction in PLANE (world "
         "axes, 1-degree spacing by default) ramp a force on the object until it moves 2 mm "
-        "(ihm.resistance): the largest force held, capped at --cap. Several --preload sets "
-        "are overlaid on one chart. Writes OUT/SCENE_PLANE.csv and .png.",
+        "(ihm.resistance): the largest force held, capped at --cap; or the stability method's "
+        "MaxDisturbance on the settled grasp with the object's weight as base load. Several "
+        "--method and --preload sets are overlaid on one chart. Writes OUT/SCENE_PLANE.csv "
+        "and .png.",
     )
     mp_.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
     mp_.add_argument("--plane", default="xy", help="two force axes, e.g. xy, xz, yz (default xy)")
     mp_.add_argument(
         "--method",
-        default="sim",
-        help="'sim' (MuJoCo); the stability methods need a base load for gravity (not yet)",
+        nargs="+",
+        default=["sim"],
+        help="one or more of sim (MuJoCo), refinement, iterative, no_mdp, spatial, gws "
+        "(default sim); maps are overlaid",
+    )
+    mp_.add_argument(
+        "--time-limit", type=float, default=None, help="seconds per solve (stability methods)"
     )
     mp_.add_argument("--directions", type=int, default=360, help="directions (default 360)")
     mp_.add_argument(
@@ -208,16 +216,27 @@ def _cmd_map(args: argparse.Namespace) -> int:
     from .maps import MapError, _check, run
 
     try:
-        _check(args.plane, args.method, args.directions, args.workers, args.cap)
+        for method in args.method:
+            _check(args.plane, method, args.directions, args.workers, args.cap)
         preloads = args.preload or [None]
+        opts = {} if args.time_limit is None else {"time_limit": args.time_limit}
         csv_path, png, walls = run(
             args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
             args.cap, args.workers, args.out, progress=not args.no_progress,
+            methods=args.method, **opts,
         )  # fmt: skip
     except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
         print(f"{PROG} map: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {csv_path} and {png} ({', '.join(f'{w:.1f} s' for w in walls)} per map)")
+    import csv
+
+    with csv_path.open() as f:
+        failed = [r["label"] for r in csv.DictReader(f) if r["force_N"] == "nan"]
+    if failed:
+        labels = sorted(set(failed))
+        print(f"{len(failed)} direction(s) without an answer (solver error or time-out) in: "
+              f"{'; '.join(labels)}")  # fmt: skip
     return 0
 
 

@@ -9,8 +9,14 @@ its directions (the same numbers for any number of workers). The result is a
 :class:`stability.maps.ResistibleMap` (method ``"sim"``), written as CSV and drawn on a
 polar PNG with :func:`stability.maps.plot_resistible`.
 
-The stability methods' maps of the same scenes need the object's weight as a base load
-of MaxDisturbance (every scene has gravity); they are not offered here yet.
+Any stability method that answers MaxDisturbance on spatial grasps (``refinement``,
+``iterative``, ``no_mdp``, ``spatial``, ``gws``) maps the same directions on the grasp read
+off the settled scene (:func:`ihm.contacts.grasp_from_mujoco`): the load is the same force
+through the object's centre of mass, written in the object frame as the wrench
+``(R^T u, c x R^T u)`` about the object origin (``c`` the centre of mass in the object
+frame), the object's weight is the query's base load (``SceneGrasp.gravity_wrench``) and
+the commands are the preload the scene was settled with. Directions whose solve fails
+(time-out) are NaN in the map.
 """
 
 from __future__ import annotations
@@ -33,9 +39,9 @@ from . import scenes
 from .ratchet import Ratchet
 from .resistance import simulated_resistance
 
-__all__ = ["MapError", "simulated_map", "write_map_csv", "plot_maps", "METHODS"]
+__all__ = ["METHODS", "MapError", "analysis_map", "plot_maps", "simulated_map", "write_map_csv"]
 
-METHODS = ("sim",)
+METHODS = ("sim", "refinement", "iterative", "no_mdp", "spatial", "gws")
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
@@ -47,10 +53,7 @@ def _check(plane: str, method: str, directions: int, workers: int, cap: float) -
     if len(plane) != 2 or any(a not in _AXES for a in plane) or plane[0] == plane[1]:
         raise MapError(f"plane must name two distinct axes of x, y, z (e.g. 'xy'), got {plane!r}")
     if method not in METHODS:
-        raise MapError(
-            f"unknown method {method!r}; choose one of {', '.join(METHODS)} (the stability "
-            "methods need a base load for the scenes' gravity: not yet)"
-        )
+        raise MapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if int(directions) < 1 or int(workers) < 1:
         raise MapError(f"directions and workers must be >= 1, got {directions}, {workers}")
     if not (np.isfinite(cap) and cap > 0):
@@ -126,29 +129,105 @@ def simulated_map(
         dirs.append((w, float(cap), resistance_kwargs))
     pre = None if preload is None else np.asarray(preload, dtype=float)
     state = _settled_state(scene, pre)
-    it: Any
-    if workers == 1:
-        _init(scene, state, nonbackdrivable)
-        it = map(_one, dirs)
-        pool = None
+    out = _map_jobs(_one, dirs, workers, _init, (scene, state, nonbackdrivable), progress,
+                    f"{scene} sim map")  # fmt: skip
+    mags = np.array([v for v, _ in out])
+    capped = np.array([c for _, c in out], dtype=bool)
+    return ResistibleMap(angles, mags, capped, float(cap), plane, "sim")
+
+
+def _init_analysis(grasp: Any, commands: np.ndarray, com: np.ndarray, method: str,
+                   options: dict[str, Any]) -> None:  # fmt: skip
+    from stability import Grasp
+
+    rigid = Grasp(points=grasp.points, normals=grasp.normals, mu=grasp.mu)
+    _STATE.update(grasp=grasp, rigid=rigid, commands=commands, com=com, method=method,
+                  options=options)  # fmt: skip
+
+
+def _one_analysis(args: tuple[np.ndarray, float]) -> tuple[float, bool]:
+    from stability import MaxDisturbance, solve
+
+    u, cap = args
+    g = _STATE["grasp"]
+    f = g.object_mat.T @ u[:3]
+    d = np.r_[f, np.cross(_STATE["com"], f)]
+    if _STATE["method"] == "gws":  # a rigid-hand method: the contacts only, no commands
+        q = MaxDisturbance(d, cap=cap, base=g.gravity_wrench)
+        sol = solve(_STATE["rigid"], q, method="gws")  # an LP: no time limit to pass
     else:
-        method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        ctx = mp.get_context(method)
-        pool = ctx.Pool(workers, initializer=_init, initargs=(scene, state, nonbackdrivable))
-        it = pool.imap(_one, dirs)
+        q = MaxDisturbance(d, commands=_STATE["commands"], cap=cap, base=g.gravity_wrench)
+        sol = solve(g, q, method=_STATE["method"], **_STATE["options"])
+    if sol.status not in ("solved", "optimal") and sol.value is None:
+        return float("nan"), False
+    value = sol.value if sol.stable and sol.value is not None else 0.0
+    return float(value), bool(sol.stats.get("capped", False))
+
+
+def analysis_map(
+    scene: str,
+    plane: str = "xy",
+    directions: int = 360,
+    *,
+    method: str = "refinement",
+    preload: ArrayLike | None = None,
+    cap: float = 10.0,
+    workers: int = 1,
+    progress: bool = True,
+    **options: Any,
+) -> ResistibleMap:
+    """The stability method's resistible force per direction on the settled scene's grasp
+    (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...)."""
+    from .contacts import grasp_from_mujoco
+
+    _check(plane, method, directions, workers, cap)
+    if method == "sim":
+        raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
+    model, data = scenes.load_scene(scene, preload=preload)
+    commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
+    grasp = grasp_from_mujoco(model, data)
+    com = model.body_ipos[model.body("object").id].copy()
+    angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
+    i, j = _AXES[plane[0]], _AXES[plane[1]]
+    jobs = []
+    for a in angles:
+        u = np.zeros(3)
+        u[i], u[j] = np.cos(a), np.sin(a)
+        jobs.append((u, float(cap)))
+    args = (grasp, commands, com, method, options)
+    out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
+                    f"{scene} {method} map")  # fmt: skip
+    return ResistibleMap(
+        angles,
+        np.array([v for v, _ in out]),
+        np.array([c for _, c in out], dtype=bool),
+        float(cap),
+        plane,
+        method,
+    )
+
+
+def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, progress: bool,
+              desc: str) -> list:  # fmt: skip
+    """``fn`` over ``jobs`` in this process (``workers`` 1) or a pool, in order, with a bar."""
+    pool = None
+    if workers == 1:
+        init(*initargs)
+        it: Any = map(fn, jobs)
+    else:
+        start = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+        pool = mp.get_context(start).Pool(workers, initializer=init, initargs=initargs)
+        it = pool.imap(fn, jobs)
     if progress:
         from tqdm import tqdm
 
-        it = tqdm(it, total=len(dirs), desc=f"{scene} sim map", unit="dir")
+        it = tqdm(it, total=len(jobs), desc=desc, unit="dir")
     try:
-        out = list(it)
+        return list(it)
     finally:
         if pool is not None:
             pool.close()
             pool.join()
-    mags = np.array([v for v, _ in out])
-    capped = np.array([c for _, c in out], dtype=bool)
-    return ResistibleMap(angles, mags, capped, float(cap), plane, "sim")
 
 
 def write_map_csv(path: Path, maps: Sequence[tuple[str, ResistibleMap]]) -> Path:
@@ -193,21 +272,33 @@ def run(
     workers: int,
     out: Path,
     progress: bool = True,
+    methods: Sequence[str] = ("sim",),
+    **options: Any,
 ) -> tuple[Path, Path, list[float]]:
-    """The CLI's work: one simulated map per preload, CSV + PNG; returns their paths and the
-    wall time of each map [s]."""
+    """The CLI's work: one map per method and preload, CSV + PNG; returns their paths and
+    the wall time of each map [s]."""
     maps, walls = [], []
-    for pre in preloads:
-        t = time.perf_counter()
-        rm = simulated_map(
-            scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable, cap=cap,
-            workers=workers, progress=progress,
-        )  # fmt: skip
-        walls.append(time.perf_counter() - t)
-        what = "default commands" if pre is None else "commands " + " ".join(f"{x:g}" for x in pre)
-        maps.append((f"sim, {what}{', ratcheted' if nonbackdrivable else ''}", rm))
+    for method in methods:
+        for pre in preloads:
+            t = time.perf_counter()
+            if method == "sim":
+                rm = simulated_map(
+                    scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable,
+                    cap=cap, workers=workers, progress=progress,
+                )  # fmt: skip
+            else:
+                rm = analysis_map(
+                    scene, plane, directions, method=method, preload=pre, cap=cap,
+                    workers=workers, progress=progress, **options,
+                )  # fmt: skip
+            walls.append(time.perf_counter() - t)
+            what = (
+                "default commands" if pre is None else "commands " + " ".join(f"{x:g}" for x in pre)
+            )
+            tag = ", ratcheted" if (method == "sim" and nonbackdrivable) else ""
+            maps.append((f"{method}, {what}{tag}", rm))
     stem = f"{scene}_{plane}"
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
-    title = f"{scene}: resistible force in the {plane} plane [N] (MuJoCo, cap {cap:g} N)"
+    title = f"{scene}: resistible force in the {plane} plane [N] (cap {cap:g} N)"
     png = plot_maps(out / f"{stem}.png", maps, title)
     return csv_path, png, walls

@@ -166,3 +166,18 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
             cwd=root, env=env, capture_output=True, text=True, timeout=120,
         )  # fmt: skip
         assert q.returncode == 2 and msg in q.stderr, (bad, q.stderr)
+
+
+def test_analysis_map_on_a_scene_grasp() -> None:
+    """A stability method's map on the settled scene's grasp, the weight as base load: gws
+    on barrett_box gives finite positive forces, symmetric in +-x and +-y like the box grasp;
+    an unknown method is refused."""
+    from ihm.maps import MapError, analysis_map
+
+    rm = analysis_map("barrett_box", "xy", 4, method="gws", cap=20, progress=False)
+    assert rm.method == "gws" and np.all(np.isfinite(rm.magnitudes))
+    assert np.all(rm.magnitudes > 0) and not rm.capped.any()
+    assert rm.magnitudes[0] == pytest.approx(rm.magnitudes[2], rel=1e-4)
+    assert rm.magnitudes[1] == pytest.approx(rm.magnitudes[3], rel=1e-4)
+    with pytest.raises(MapError, match="unknown method"):
+        analysis_map("barrett_box", "xy", 4, method="nope")
