@@ -155,11 +155,17 @@ def scale_bounds(
     return ExactBounds(B, motion, excess, S)
 
 
+CLEAN_RTOL = 1e-7
+
+
 def _clean(A: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``A`` with entries below ``1e-12 max|A|`` set to 0 (round-off of frames read from a
-    simulator, e.g. 4e-17 normal components, which a solver would otherwise exploit)."""
+    """``A`` with entries below ``CLEAN_RTOL max|A|`` (1e-7) set to 0: round-off of frames
+    and Jacobians read from a simulator (4e-17 normal components; 1e-9 m/rad out-of-plane
+    entries of the Barrett spread joint next to 0.12 m/rad), which a solver would otherwise
+    exploit, or which make its LPs numerically singular (SCIP: "error in LP solver" on
+    ``barrett_box``). A 1e-7 relative entry moves no answer beyond the solvers' tolerances."""
     big = float(np.abs(A).max(initial=0.0))
-    return np.where(np.abs(A) > 1e-12 * big, A, 0.0)
+    return np.where(np.abs(A) > CLEAN_RTOL * big, A, 0.0)
 
 
 @dataclass

@@ -75,3 +75,24 @@ def test_bad_base() -> None:
         solve(pinch(), MaxDisturbance(UP, commands=[0.1, 0.1], base=[0, 0, 1]))
     with pytest.raises(GraspError, match="base"):
         solve(pinch(), MaxDisturbance(UP, commands=[0.1, 0.1], base=[0, 0, np.nan, 0, 0, 0]))
+
+
+def test_scene_grasp_with_round_off_jacobian_entries() -> None:
+    """barrett_box as read from MuJoCo: the spread joint's Jacobian column has 1e-9 m/rad
+    round-off entries next to 0.12 m/rad, which made SCIP's LPs fail ("error in LP solver")
+    until the exact model zeroed entries below 1e-7 of the largest. Now the weight alone is
+    stable, and refinement and iterative agree on the largest force along the object's +y
+    with the weight as base load."""
+    import ihm
+    from ihm.contacts import grasp_from_mujoco
+
+    model, data = ihm.load_scene("barrett_box")
+    g = grasp_from_mujoco(model, data)
+    cmd = ihm.scenes.default_preload(model)
+    assert np.abs(g.J[:, 0]).min() < 1e-8 < np.abs(g.J[:, 0]).max()  # the round-off entries
+    assert solve(g, Existence(g.gravity_wrench, commands=cmd), method="refinement").stable
+    q = MaxDisturbance([0, 1, 0, 0, 0, 0], commands=cmd, cap=20, base=g.gravity_wrench)
+    ref = solve(g, q, method="refinement", time_limit=60)
+    it = solve(g, q, method="iterative", time_limit=60)
+    assert ref.stable and it.stable and 1.0 < ref.value < 20
+    assert it.value == pytest.approx(ref.value, rel=0.01)
