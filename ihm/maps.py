@@ -60,6 +60,16 @@ def _check(plane: str, method: str, directions: int, workers: int, cap: float) -
         raise MapError(f"cap must be a finite number > 0, got {cap}")
 
 
+def _directions(plane: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` angles from the plane's first axis towards its second, and the unit force
+    directions ``cos(a) e_1 + sin(a) e_2`` (n, 3) in world axes."""
+    angles = np.linspace(0.0, 2 * np.pi, int(n), endpoint=False)
+    units = np.zeros((len(angles), 3))
+    units[:, _AXES[plane[0]]] = np.cos(angles)
+    units[:, _AXES[plane[1]]] = np.sin(angles)
+    return angles, units
+
+
 _STATE: dict[str, Any] = {}
 
 
@@ -120,13 +130,8 @@ def simulated_map(
     """
     _check(plane, "sim", directions, workers, cap)
     scenes.scene_path(scene)  # unknown scene: SceneError before any worker starts
-    angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
-    i, j = _AXES[plane[0]], _AXES[plane[1]]
-    dirs = []
-    for a in angles:
-        w = np.zeros(6)
-        w[i], w[j] = np.cos(a), np.sin(a)
-        dirs.append((w, float(cap), resistance_kwargs))
+    angles, units = _directions(plane, directions)
+    dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
     pre = None if preload is None else np.asarray(preload, dtype=float)
     state = _settled_state(scene, pre)
     out = _map_jobs(_one, dirs, workers, _init, (scene, state, nonbackdrivable), progress,
@@ -187,13 +192,8 @@ def analysis_map(
     commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
     grasp = grasp_from_mujoco(model, data)
     com = model.body_ipos[model.body("object").id].copy()
-    angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
-    i, j = _AXES[plane[0]], _AXES[plane[1]]
-    jobs = []
-    for a in angles:
-        u = np.zeros(3)
-        u[i], u[j] = np.cos(a), np.sin(a)
-        jobs.append((u, float(cap)))
+    angles, units = _directions(plane, directions)
+    jobs = [(u, float(cap)) for u in units]
     args = (grasp, commands, com, method, options)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
                     f"{scene} {method} map")  # fmt: skip
