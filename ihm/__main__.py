@@ -220,7 +220,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
             _check(args.plane, method, args.directions, args.workers, args.cap)
         preloads = args.preload or [None]
         opts = {} if args.time_limit is None else {"time_limit": args.time_limit}
-        csv_path, png, walls = run(
+        csv_path, png, walls, agree = run(
             args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
             args.cap, args.workers, args.out, progress=not args.no_progress,
             methods=args.method, **opts,
@@ -229,6 +229,12 @@ def _cmd_map(args: argparse.Namespace) -> int:
         print(f"{PROG} map: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {csv_path} and {png} ({', '.join(f'{w:.1f} s' for w in walls)} per map)")
+    for label, _, a in agree:
+        print(
+            f"{label} vs sim: {a['direction_agreement']:.0%} of {a['answered']} directions agree "
+            f"on finite vs capped; median |ln(pred/sim)| = {a['median_abs_log_ratio']:.3f} over "
+            f"{a['finite']} finite directions"
+        )
     import csv
 
     with csv_path.open() as f:

@@ -39,7 +39,15 @@ from . import scenes
 from .ratchet import Ratchet
 from .resistance import simulated_resistance
 
-__all__ = ["METHODS", "MapError", "analysis_map", "plot_maps", "simulated_map", "write_map_csv"]
+__all__ = [
+    "METHODS",
+    "MapError",
+    "agreement",
+    "analysis_map",
+    "plot_maps",
+    "simulated_map",
+    "write_map_csv",
+]
 
 METHODS = ("sim", "refinement", "iterative", "no_mdp", "spatial", "gws")
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -230,6 +238,28 @@ def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, pro
             pool.join()
 
 
+def agreement(pred: ResistibleMap, sim: ResistibleMap) -> dict[str, float]:
+    """How a predicted map agrees with a simulated one over the same directions.
+
+    ``direction_agreement``: the fraction of directions (both answered) where both say
+    "capped" (resisted up to the cap) or both say "finite"; ``median_abs_log_ratio``:
+    over directions finite and positive in both, the median ``|ln(pred / sim)|`` (0.15 is
+    about 16 %); ``finite``: how many such directions; ``answered``: directions with a
+    number in both (NaN = a solver gave no answer)."""
+    if len(pred.angles) != len(sim.angles) or not np.allclose(pred.angles, sim.angles):
+        raise MapError("the two maps must have the same directions")
+    ok = np.isfinite(pred.magnitudes) & np.isfinite(sim.magnitudes)
+    same = pred.capped == sim.capped
+    finite = ok & ~pred.capped & ~sim.capped & (pred.magnitudes > 0) & (sim.magnitudes > 0)
+    ratio = np.abs(np.log(pred.magnitudes[finite] / sim.magnitudes[finite]))
+    return {
+        "direction_agreement": float(same[ok].mean()) if ok.any() else float("nan"),
+        "median_abs_log_ratio": float(np.median(ratio)) if finite.any() else float("nan"),
+        "finite": int(finite.sum()),
+        "answered": int(ok.sum()),
+    }
+
+
 def write_map_csv(path: Path, maps: Sequence[tuple[str, ResistibleMap]]) -> Path:
     """One row per (label, direction): label, method, plane, angle_deg, force_N, capped."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -274,10 +304,11 @@ def run(
     progress: bool = True,
     methods: Sequence[str] = ("sim",),
     **options: Any,
-) -> tuple[Path, Path, list[float]]:
-    """The CLI's work: one map per method and preload, CSV + PNG; returns their paths and
-    the wall time of each map [s]."""
-    maps, walls = [], []
+) -> tuple[Path, Path, list[float], list[tuple[str, str, dict[str, float]]]]:
+    """The CLI's work: one map per method and preload, CSV + PNG; returns their paths, the
+    wall time of each map [s] and, for every stability-method map with a ``sim`` map of the
+    same commands, its :func:`agreement` with it (also written to ``*_agreement.csv``)."""
+    maps, walls, keys = [], [], []
     for method in methods:
         for pre in preloads:
             t = time.perf_counter()
@@ -297,8 +328,20 @@ def run(
             )
             tag = ", ratcheted" if (method == "sim" and nonbackdrivable) else ""
             maps.append((f"{method}, {what}{tag}", rm))
+            keys.append((method, what))
     stem = f"{scene}_{plane}"
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
     title = f"{scene}: resistible force in the {plane} plane [N] (cap {cap:g} N)"
     png = plot_maps(out / f"{stem}.png", maps, title)
-    return csv_path, png, walls
+    sims = {what: rm for (method, what), (_, rm) in zip(keys, maps, strict=True) if method == "sim"}
+    agree = []
+    for (method, what), (label, rm) in zip(keys, maps, strict=True):
+        if method != "sim" and what in sims:
+            agree.append((label, what, agreement(rm, sims[what])))
+    if agree:
+        with (out / f"{stem}_agreement.csv").open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["map", "commands", *agree[0][2]])
+            for label, what, a in agree:
+                w.writerow([label, what, *a.values()])
+    return csv_path, png, walls, agree

@@ -181,3 +181,23 @@ def test_analysis_map_on_a_scene_grasp() -> None:
     assert rm.magnitudes[1] == pytest.approx(rm.magnitudes[3], rel=1e-4)
     with pytest.raises(MapError, match="unknown method"):
         analysis_map("barrett_box", "xy", 4, method="nope")
+
+
+def test_map_agreement_measures() -> None:
+    """agreement(): finite-vs-capped agreement over answered directions and the median
+    |ln(pred/sim)| over directions finite in both, on hand-made maps."""
+    from ihm.maps import MapError, agreement
+    from stability.maps import ResistibleMap
+
+    a = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    sim = ResistibleMap(a, np.array([1.0, 2.0, 10.0, 4.0, 1.0, np.nan]),
+                        np.array([0, 0, 1, 0, 0, 0], bool), 10.0, "xy", "sim")  # fmt: skip
+    pred = ResistibleMap(a, np.array([1.0, 2.0 * np.e, 10.0, 10.0, 0.0, 3.0]),
+                         np.array([0, 0, 1, 1, 0, 0], bool), 10.0, "xy", "refinement")  # fmt: skip
+    got = agreement(pred, sim)
+    assert got["answered"] == 5  # the NaN direction is left out
+    assert got["direction_agreement"] == pytest.approx(4 / 5)  # direction 3: capped vs 4 N
+    assert got["finite"] == 2  # directions 0 and 1 (direction 4 predicts 0)
+    assert got["median_abs_log_ratio"] == pytest.approx(0.5)  # |ln 1| and |ln e|
+    with pytest.raises(MapError, match="same directions"):
+        agreement(pred, ResistibleMap(a[:3], a[:3], np.zeros(3, bool), 10.0, "xy", "sim"))
