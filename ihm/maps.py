@@ -33,10 +33,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from stability import GraspError
-from stability.maps import ResistibleMap, plot_resistible
+from stability.maps import ResistibleMap, plane_axes, plot_resistible
 
 from . import scenes
-from .ratchet import Ratchet
+from .ratchet import Ratchet, actuated_joints, actuated_tendons
 from .resistance import simulated_resistance
 
 __all__ = [
@@ -50,7 +50,6 @@ __all__ = [
 ]
 
 METHODS = ("sim", "refinement", "iterative", "no_mdp", "spatial", "gws")
-_AXES = {"x": 0, "y": 1, "z": 2}
 
 
 class MapError(GraspError):
@@ -58,8 +57,10 @@ class MapError(GraspError):
 
 
 def _check(plane: str, method: str, directions: int, workers: int, cap: float) -> None:
-    if len(plane) != 2 or any(a not in _AXES for a in plane) or plane[0] == plane[1]:
-        raise MapError(f"plane must name two distinct axes of x, y, z (e.g. 'xy'), got {plane!r}")
+    try:
+        plane_axes(plane)
+    except GraspError as exc:
+        raise MapError(str(exc)) from None
     if method not in METHODS:
         raise MapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if int(directions) < 1 or int(workers) < 1:
@@ -72,9 +73,10 @@ def _directions(plane: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """``n`` angles from the plane's first axis towards its second, and the unit force
     directions ``cos(a) e_1 + sin(a) e_2`` (n, 3) in world axes."""
     angles = np.linspace(0.0, 2 * np.pi, int(n), endpoint=False)
+    i, j = plane_axes(plane)
     units = np.zeros((len(angles), 3))
-    units[:, _AXES[plane[0]]] = np.cos(angles)
-    units[:, _AXES[plane[1]]] = np.sin(angles)
+    units[:, i] = np.cos(angles)
+    units[:, j] = np.sin(angles)
     return angles, units
 
 
@@ -106,8 +108,6 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
     mujoco.mj_forward(m, d)
     ratchet = None
     if _STATE["nb"]:
-        from .ratchet import actuated_joints, actuated_tendons
-
         ratchet = Ratchet(m, d, actuated_joints(m), tendons=actuated_tendons(m))
     try:
         res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **kw)

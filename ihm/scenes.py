@@ -28,6 +28,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import GraspError
 
+from .ratchet import Ratchet, actuated_joints, actuated_tendons
+
 __all__ = [
     "SCENES_DIR",
     "SceneError",
@@ -320,8 +322,6 @@ def load_scene(
         mujoco.mj_forward(model, data)
     last_ratchet = None
     if nonbackdrivable:
-        from .ratchet import Ratchet, actuated_joints, actuated_tendons
-
         last_ratchet = Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
     return model, data
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._mipcommon import CONDITIONS, QueryData
+from ._mipcommon import CONDITIONS, QueryData, query_wrench_max
 from .errors import GraspError
 from .exact import (
     ExactBounds,
@@ -57,11 +57,7 @@ class QueryModel:
 
     @property
     def wrench_max(self) -> NDArray[np.float64]:
-        """Per component the largest magnitude the query's wrench takes."""
-        if self.direction is None:
-            return self.wrench
-        base = np.zeros_like(self.direction) if self.base is None else self.base
-        return np.maximum(np.abs(base), np.abs(base + self.cap * self.direction))
+        return query_wrench_max(self)
 
     @classmethod
     def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> QueryModel:

@@ -111,11 +111,17 @@ class QueryData:
 
     @property
     def wrench_max(self) -> NDArray[np.float64]:
-        """Per component the largest magnitude the query's wrench takes."""
-        if self.direction is None:
-            return self.wrench
-        base = np.zeros_like(self.direction) if self.base is None else self.base
-        return np.maximum(np.abs(base), np.abs(base + self.cap * self.direction))
+        return query_wrench_max(self)
+
+
+def query_wrench_max(data: Any) -> NDArray[np.float64]:
+    """Per component the largest magnitude a query's wrench takes: ``wrench`` (Existence),
+    else ``max(|base|, |base + cap direction|)`` (MaxDisturbance; ``data`` a QueryData or
+    QueryModel)."""
+    if data.direction is None:
+        return data.wrench
+    base = np.zeros_like(data.direction) if data.base is None else data.base
+    return np.maximum(np.abs(base), np.abs(base + data.cap * data.direction))
 
 
 class Stop(Exception):
@@ -194,4 +200,4 @@ def bounds_stats(bounds: ExactBounds, stats: dict[str, Any]) -> None:
 
 
 __all__ = ["CONDITIONS", "HAND_CONDITIONS", "MipOptions", "QueryData", "Stop", "bounds_stats",
-           "default_backend", "run", "solution", "stopped"]  # fmt: skip
+           "default_backend", "query_wrench_max", "run", "solution", "stopped"]  # fmt: skip

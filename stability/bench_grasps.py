@@ -21,7 +21,6 @@ medians), and prints the table beside the thesis'.
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ import numpy as np
 
 from . import examples as ex
 from .api import solve
+from .bench import write_csv
 from .grasp import Grasp
 from .mip import INF, MipModel
 from .mip import solve as mip_solve
@@ -164,11 +164,7 @@ def write_grasps(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "grasps.csv"
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    path = write_csv(rows, out / "grasps.csv")
     summ = summary(rows)
     fig, ax = plt.subplots(figsize=(9, 4.5))
     x = np.arange(len(summ))

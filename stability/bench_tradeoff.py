@@ -28,6 +28,7 @@ import numpy as np
 
 from . import examples as ex
 from .api import solve
+from .bench import write_csv
 from .errors import GraspError, MethodError
 from .queries import MaxDisturbance
 
@@ -158,11 +159,7 @@ def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "tradeoff.csv"
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    path = write_csv(rows, out / "tradeoff.csv")
     fig, ax = plt.subplots(figsize=(10.5, 5.5))
     for r in rows:
         col = COLORS[r["family"]]

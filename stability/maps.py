@@ -27,9 +27,17 @@ from .errors import GraspError
 from .grasp import Grasp
 from .queries import MaxDisturbance
 
-__all__ = ["ResistibleMap", "resistible_forces", "plot_resistible", "thesis_figure"]
+__all__ = ["ResistibleMap", "plane_axes", "resistible_forces", "plot_resistible", "thesis_figure"]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def plane_axes(plane: str) -> tuple[int, int]:
+    """Indices of the two force axes a plane name such as ``"xy"`` or ``"zx"`` names;
+    :class:`GraspError` unless it names two distinct axes of x, y, z."""
+    if len(plane) != 2 or any(a not in _AXES for a in plane) or plane[0] == plane[1]:
+        raise GraspError(f"plane must name two distinct force axes such as 'xy', got {plane!r}")
+    return _AXES[plane[0]], _AXES[plane[1]]
 
 
 @dataclass(frozen=True)
@@ -66,14 +74,12 @@ def resistible_forces(
     ``plane`` names two force axes (``"xy"``; spatial grasps also ``"xz"``,
     ``"yz"``); the remaining force and all torque components are zero.
     """
-    if len(plane) != 2 or any(a not in _AXES for a in plane) or plane[0] == plane[1]:
-        raise GraspError(f"plane must name two distinct force axes such as 'xy', got {plane!r}")
+    i, j = plane_axes(plane)
     if grasp.planar and plane != "xy":
         raise GraspError(f"a planar grasp has only the 'xy' force plane, got {plane!r}")
     if int(directions) < 1:
         raise GraspError(f"directions must be >= 1, got {directions}")
     angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
-    i, j = _AXES[plane[0]], _AXES[plane[1]]
     mags = np.zeros(len(angles))
     capped = np.zeros(len(angles), dtype=bool)
     it = angles

@@ -143,7 +143,8 @@ class ChunkedVecEnv(VecEnv):
         self.sub = [[range(p.start + c.start, p.start + c.stop) for c in _chunks(len(p), k)]
                     for p in self.parts]  # fmt: skip
         self.chunks = [[i for p in self.sub for i in p[w]] for w in range(k)]
-        self._order = np.array([i for c in self.chunks for i in c])
+        # env i sits at position _inverse[i] of the workers' concatenated results
+        self._inverse = np.argsort([i for c in self.chunks for i in c])
         self._where = {i: (w, j) for w, c in enumerate(self.chunks) for j, i in enumerate(c)}
         if start_method is None:
             methods = mp.get_all_start_methods()
@@ -172,18 +173,20 @@ class ChunkedVecEnv(VecEnv):
         if self._pending:
             raise RuntimeError(f"{what} with part steps pending: collect them first")
 
+    def _env_order(self, items: Any) -> Any:
+        """Items concatenated in worker order (an array or a list), in env order."""
+        if isinstance(items, np.ndarray):
+            return items[self._inverse]
+        return [items[k] for k in self._inverse]
+
     def _global(self, results: list[tuple]) -> tuple:
         """Workers' concatenated results in global env order."""
-        obs = np.concatenate([r[0] for r in results])
-        rews = np.concatenate([r[1] for r in results])
-        dones = np.concatenate([r[2] for r in results])
-        infos_w = [info for r in results for info in r[3]]
-        out_obs, out_rews, out_dones = np.empty_like(obs), np.empty_like(rews), np.empty_like(dones)
-        out_obs[self._order], out_rews[self._order], out_dones[self._order] = obs, rews, dones
-        infos: list[dict] = [{}] * self.num_envs
-        for j, i in enumerate(self._order):
-            infos[i] = infos_w[j]
-        return out_obs, out_rews, out_dones, infos
+        return (
+            self._env_order(np.concatenate([r[0] for r in results])),
+            self._env_order(np.concatenate([r[1] for r in results])),
+            self._env_order(np.concatenate([r[2] for r in results])),
+            self._env_order([info for r in results for info in r[3]]),
+        )
 
     # -- stepping --------------------------------------------------------------------------
     def step_async(self, actions: np.ndarray) -> None:
@@ -230,16 +233,10 @@ class ChunkedVecEnv(VecEnv):
             options = [self._options[i] for i in chunk]
             remote.send(("reset", (seeds, options)))
         results = [remote.recv() for remote in self.remotes]
-        obs = np.concatenate([r[0] for r in results])
-        infos_w = [info for r in results for info in r[1]]
-        out = np.empty_like(obs)
-        out[self._order] = obs
-        self.reset_infos = [{}] * self.num_envs
-        for j, i in enumerate(self._order):
-            self.reset_infos[i] = infos_w[j]
+        self.reset_infos = self._env_order([info for r in results for info in r[1]])
         self._reset_seeds()
         self._reset_options()
-        return out
+        return self._env_order(np.concatenate([r[0] for r in results]))
 
     def close(self) -> None:
         if self.closed:
@@ -257,11 +254,7 @@ class ChunkedVecEnv(VecEnv):
         self._idle("get_images")
         for remote in self.remotes:
             remote.send(("render", None))
-        imgs = [img for remote in self.remotes for img in remote.recv()]
-        out: list[np.ndarray | None] = [None] * self.num_envs
-        for j, i in enumerate(self._order):
-            out[i] = imgs[j]
-        return out
+        return self._env_order([img for remote in self.remotes for img in remote.recv()])
 
     # -- attributes and methods, routed to the worker that holds each env ---------------------
     def _route(self, indices: VecEnvIndices) -> list[tuple[int, list[int], list[int]]]:
