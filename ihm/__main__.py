@@ -125,6 +125,21 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="ratchet the motor joints and actuated tendons (ihm.ratchet)",
     )
+    mp_.add_argument(
+        "--seat",
+        type=float,
+        nargs="+",
+        metavar="F",
+        help="with --nonbackdrivable: settle with these commands first, ratchet, then load "
+        "with --preload (actuators commanded 0 stay as passive, nonbackdrivable supports)",
+    )
+    mp_.add_argument(
+        "--normal-uncertainty",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="contact-normal uncertainty eta [deg] for the refinement method (default 0)",
+    )
     mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
     mp_.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     mp_.add_argument("--out", type=Path, default=Path("."), help="output folder (default .)")
@@ -219,11 +234,17 @@ def _cmd_map(args: argparse.Namespace) -> int:
         for method in args.method:
             _check(args.plane, method, args.directions, args.workers, args.cap)
         preloads = args.preload or [None]
-        opts = {} if args.time_limit is None else {"time_limit": args.time_limit}
+        opts: dict[str, float] = {} if args.time_limit is None else {"time_limit": args.time_limit}
+        if args.normal_uncertainty is not None:
+            if set(args.method) - {"refinement", "sim"}:
+                raise MapError("--normal-uncertainty applies to the refinement method only")
+            opts["normal_uncertainty"] = float(np.radians(args.normal_uncertainty))
+        if args.seat is not None and not args.nonbackdrivable:
+            raise MapError("--seat needs --nonbackdrivable (it ratchets the seated grasp)")
         csv_path, png, walls, agree = run(
             args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
             args.cap, args.workers, args.out, progress=not args.no_progress,
-            methods=args.method, **opts,
+            methods=args.method, seat=args.seat, **opts,
         )  # fmt: skip
     except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
         print(f"{PROG} map: error: {exc}", file=sys.stderr)

@@ -86,19 +86,25 @@ _STATE: dict[str, Any] = {}
 _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION  # positions, velocities, controls, applied loads
 
 
-def _settled_state(scene: str, preload: Any) -> np.ndarray:
-    """Settle the scene (errors surface here, in the calling process) and return its state."""
-    model, data = scenes.load_scene(scene, preload=preload)
+def _settled_state(
+    scene: str, preload: Any, nonbackdrivable: bool, seat: Any
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Settle the scene (errors surface here, in the calling process); its state and, when
+    nonbackdrivable, the ratchet's stops."""
+    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
+                                    seat=seat)  # fmt: skip
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
-    return state
+    stops = None if scenes.last_ratchet is None else scenes.last_ratchet.stops.copy()
+    return state, stops
 
 
-def _init(scene: str, state: np.ndarray, nonbackdrivable: bool) -> None:
-    """Worker set-up: the scene's model and the settled state every direction starts from."""
+def _init(scene: str, state: np.ndarray, stops: np.ndarray | None) -> None:
+    """Worker set-up: the scene's model and the settled state (and ratchet stops) every
+    direction starts from."""
     model = mujoco.MjModel.from_xml_path(str(scenes.scene_path(scene)))
     data = mujoco.MjData(model)
-    _STATE.update(model=model, data=data, state=state, spec=_SPEC, nb=nonbackdrivable)
+    _STATE.update(model=model, data=data, state=state, spec=_SPEC, stops=stops)
 
 
 def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]:
@@ -107,8 +113,9 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
     mujoco.mj_setState(m, d, _STATE["state"], _STATE["spec"])
     mujoco.mj_forward(m, d)
     ratchet = None
-    if _STATE["nb"]:
+    if _STATE["stops"] is not None:
         ratchet = Ratchet(m, d, actuated_joints(m), tendons=actuated_tendons(m))
+        ratchet.stops = _STATE["stops"]
     try:
         res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **kw)
     finally:
@@ -124,6 +131,7 @@ def simulated_map(
     *,
     preload: ArrayLike | None = None,
     nonbackdrivable: bool = False,
+    seat: ArrayLike | None = None,
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
@@ -133,7 +141,8 @@ def simulated_map(
 
     ``preload``: commanded actuator forces (default: the scene's ``ihm_preload``);
     ``nonbackdrivable``: ratchet the motor joints and actuated tendons
-    (:mod:`ihm.ratchet`); ``resistance_kwargs`` go to
+    (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
+    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``resistance_kwargs`` go to
     :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
     """
     _check(plane, "sim", directions, workers, cap)
@@ -141,8 +150,8 @@ def simulated_map(
     angles, units = _directions(plane, directions)
     dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
     pre = None if preload is None else np.asarray(preload, dtype=float)
-    state = _settled_state(scene, pre)
-    out = _map_jobs(_one, dirs, workers, _init, (scene, state, nonbackdrivable), progress,
+    state, stops = _settled_state(scene, pre, nonbackdrivable, seat)
+    out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops), progress,
                     f"{scene} sim map")  # fmt: skip
     mags = np.array([v for v, _ in out])
     capped = np.array([c for _, c in out], dtype=bool)
@@ -184,19 +193,26 @@ def analysis_map(
     *,
     method: str = "refinement",
     preload: ArrayLike | None = None,
+    nonbackdrivable: bool = False,
+    seat: ArrayLike | None = None,
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
     **options: Any,
 ) -> ResistibleMap:
     """The stability method's resistible force per direction on the settled scene's grasp
-    (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...)."""
+    (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...).
+    ``nonbackdrivable`` and ``seat`` settle the scene as :func:`simulated_map` does, so that
+    both read the same grasp (the methods model every actuator as nonbackdrivable)."""
     from .contacts import grasp_from_mujoco
 
     _check(plane, method, directions, workers, cap)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
-    model, data = scenes.load_scene(scene, preload=preload)
+    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
+                                    seat=seat)  # fmt: skip
+    if scenes.last_ratchet is not None:
+        scenes.last_ratchet.release()
     commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
     grasp = grasp_from_mujoco(model, data)
     com = model.body_ipos[model.body("object").id].copy()
@@ -303,6 +319,7 @@ def run(
     out: Path,
     progress: bool = True,
     methods: Sequence[str] = ("sim",),
+    seat: ArrayLike | None = None,
     **options: Any,
 ) -> tuple[Path, Path, list[float], list[tuple[str, str, dict[str, float]]]]:
     """The CLI's work: one map per method and preload, CSV + PNG; returns their paths, the
@@ -315,12 +332,13 @@ def run(
             if method == "sim":
                 rm = simulated_map(
                     scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable,
-                    cap=cap, workers=workers, progress=progress,
+                    seat=seat, cap=cap, workers=workers, progress=progress,
                 )  # fmt: skip
             else:
                 rm = analysis_map(
-                    scene, plane, directions, method=method, preload=pre, cap=cap,
-                    workers=workers, progress=progress, **options,
+                    scene, plane, directions, method=method, preload=pre,
+                    nonbackdrivable=nonbackdrivable, seat=seat, cap=cap, workers=workers,
+                    progress=progress, **options,
                 )  # fmt: skip
             walls.append(time.perf_counter() - t)
             what = (

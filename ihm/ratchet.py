@@ -149,6 +149,18 @@ class Ratchet:
         m = self.model
         return np.concatenate([m.jnt_range[self.joints, col], m.tendon_range[self.tendons, col]])
 
+    @stops.setter
+    def stops(self, values: NDArray[np.float64]) -> None:
+        """Set the stops (joints then tendons), e.g. to those of another copy of the scene."""
+        v = np.asarray(values, dtype=float).reshape(-1)
+        if v.shape != (len(self.joints) + len(self.tendons),) or not np.isfinite(v).all():
+            raise RatchetError(
+                f"stops must be {len(self.joints) + len(self.tendons)} finite numbers, got {v!r}"
+            )
+        col = 0 if self.sign > 0 else 1
+        self.model.jnt_range[self.joints, col] = v[: len(self.joints)]
+        self.model.tendon_range[self.tendons, col] = v[len(self.joints) :]
+
     def update(self) -> None:
         """Move each stop to its joint's (tendon's) position where it has closed past it."""
         for kind, ids in self._ids.items():

@@ -150,6 +150,7 @@ def _run_until_rest(
     hold_s: float,
     min_s: float,
     max_s: float,
+    ratchet: Ratchet | None = None,
 ) -> tuple[int, float]:
     """Step until ``max |qvel| < vtol`` for ``hold_s`` [s]; returns (steps, max |qvel|)."""
     dt = model.opt.timestep
@@ -159,7 +160,10 @@ def _run_until_rest(
     calm = 0
     vmax = np.inf
     for k in range(max_steps):
-        mujoco.mj_step(model, data)
+        if ratchet is None:
+            mujoco.mj_step(model, data)
+        else:
+            ratchet.step()
         vmax = float(np.abs(data.qvel).max()) if model.nv else 0.0
         if not np.isfinite(vmax):
             raise SceneError(f"simulation diverged (qvel not finite) at t = {data.time:.3f} s")
@@ -180,6 +184,7 @@ def settle(
     max_s: float = 10.0,
     rounds: int = 6,
     ftol: float = 1e-3,
+    ratchet: Ratchet | None = None,
 ) -> SettleInfo:
     """Close the hand with actuator forces ``commands`` until the grasp is at rest.
 
@@ -197,6 +202,10 @@ def settle(
        (the state after the last round is returned, at rest; the remaining
        force error is reported in :attr:`SettleInfo.force_error`).
        Motors (``force = ctrl``) get ``ctrl = f_c`` once.
+
+    With ``ratchet`` (:class:`ihm.ratchet.Ratchet`) every step is ``ratchet.step()``: the
+    ratcheted joints and tendons can close but not open, so an actuator commanded 0 is a
+    passive, nonbackdrivable support (the thesis' preload protocol of grasp example 2).
 
     Raises :class:`SceneError` if the grasp is not at rest after ``max_s``
     simulated seconds (per round), or the simulation diverges.
@@ -235,14 +244,17 @@ def settle(
         n_grip = int(round(grip_s / model.opt.timestep))
         for _ in range(n_grip):
             set_ctrl()  # servos act as pure force sources while the fingers close
-            mujoco.mj_step(model, data)
+            if ratchet is None:
+                mujoco.mj_step(model, data)
+            else:
+                ratchet.step()
         steps += n_grip
     finally:
         model.opt.gravity[:] = gravity
     done_rounds = 0
     vmax = np.inf
     for done_rounds in range(1, rounds + 1):  # noqa: B007
-        k, vmax = _run_until_rest(model, data, vtol, hold_s, 0.0, max_s)
+        k, vmax = _run_until_rest(model, data, vtol, hold_s, 0.0, max_s, ratchet)
         steps += k
         if vmax >= vtol:
             raise SceneError(
@@ -274,6 +286,7 @@ def load_scene(
     *,
     settle_grasp: bool = True,
     nonbackdrivable: bool = False,
+    seat: ArrayLike | None = None,
     **settle_kwargs: float,
 ) -> tuple[mujoco.MjModel, mujoco.MjData]:
     """Load scene ``name`` and settle its grasp.
@@ -290,6 +303,17 @@ def load_scene(
         (the tendon gripper's transmission): the stops sit at the settled pose and follow
         as the fingers close when the ratchet's ``update`` or ``step`` is used. The
         ratchet is ``ihm.scenes.last_ratchet``.
+    seat : with ``nonbackdrivable``, the thesis' protocol for preloading chosen actuators
+        only (grasp example 2: "preload applied exclusively by finger 1"; the tendon
+        gripper's "actively loading the distal tendon only"): first settle with the
+        commands ``seat`` (a light closing force on every actuator, so that every finger
+        touches; gravity off, so that the seat carries no weight and its own load stays
+        small), put the ratchet on at that pose, then switch (gravity on) to ``preload`` and settle
+        again with the ratchet following. An actuator commanded 0 in ``preload`` is then a
+        passive, nonbackdrivable support: its joint (tendon) cannot open, and the reaction
+        it carries is what the commanded ones produce. ``preload`` must be >= 0 where it
+        is ratcheted. Without ``seat`` the grasp settles with ``preload`` and the ratchet
+        goes on afterwards.
     settle_kwargs : passed to :func:`settle` (``vtol``, ``hold_s``, ...).
 
     Returns
@@ -315,15 +339,39 @@ def load_scene(
             f"(actuators: {', '.join(model.actuator(i).name for i in range(model.nu))}), "
             f"got shape {f_c.shape}"
         )
-    if settle_grasp:
-        last_settle = settle(model, data, f_c, **settle_kwargs)
-    else:
+    seat_c = None
+    if seat is not None:
+        if not nonbackdrivable or not settle_grasp:
+            raise SceneError("seat is the nonbackdrivable preload protocol: it needs "
+                             "nonbackdrivable=True and settle_grasp=True")  # fmt: skip
+        seat_c = _as_forces(seat, model.nu).reshape(-1)
+        if seat_c.shape != (model.nu,):
+            raise SceneError(f"seat for scene {name!r} needs {model.nu} actuator forces, "
+                             f"got shape {seat_c.shape}")  # fmt: skip
+    last_ratchet = None
+    if not settle_grasp:
         data.ctrl[:] = 0.0
         mujoco.mj_forward(model, data)
-    last_ratchet = None
-    if nonbackdrivable:
-        last_ratchet = Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
+    elif seat_c is None:
+        last_settle = settle(model, data, f_c, **settle_kwargs)
+    else:
+        gravity = model.opt.gravity.copy()
+        try:  # the object placed in the hand, the fingers closed lightly onto it
+            model.opt.gravity[:] = 0.0
+            settle(model, data, seat_c, **settle_kwargs)
+        finally:
+            model.opt.gravity[:] = gravity
+        last_ratchet = _ratchet(model, data)
+        kw = {"grip_s": 0.0, **settle_kwargs}
+        last_settle = settle(model, data, f_c, ratchet=last_ratchet, **kw)
+    if nonbackdrivable and last_ratchet is None:
+        last_ratchet = _ratchet(model, data)
     return model, data
+
+
+def _ratchet(model: mujoco.MjModel, data: mujoco.MjData) -> Ratchet:
+    """The scene's nonbackdrivable transmission: motor joints and actuated tendons."""
+    return Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
 
 
 last_settle: SettleInfo | None = None

@@ -98,8 +98,17 @@ def test_box_scene():
     # resisted passively by the inner links
     prox = [k for k in range(g.m) if model.body(g.hand_bodies[k]).name.endswith("prox")]
     assert np.all(g.normals[prox, 1] > 0.05)
-    # symmetric: the two opposing fingers carry the same load
-    assert g.forces[:, 0].max() - g.forces[:, 0].min() < 0.05 * g.forces[:, 0].max()
+    # symmetric: the two opposing fingers carry the same load, link by link
+    fn = {model.body(g.hand_bodies[k]).name: g.forces[k, 0] for k in range(g.m)}
+    for link in ("prox", "dist"):
+        assert fn[f"f1_{link}"] == pytest.approx(fn[f"f2_{link}"], rel=0.05)
+    # honest geometry: no contact exclusion, and the box is clear of the palm face (z = 0)
+    # and of the open thumb, whose bent outer link reaches x = -0.009
+    assert model.nexclude == 0
+    box = model.geom("object")
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+    world = data.geom_xpos[box.id] + (corners * box.size) @ data.geom_xmat[box.id].reshape(3, 3).T
+    assert world[:, 2].min() > 0.0005 and np.abs(world[:, 0]).max() < 0.008
 
 
 def test_spread_is_a_stiff_servo():

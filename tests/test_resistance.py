@@ -9,6 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
+import ihm
+from ihm.contacts import grasp_from_mujoco
 from ihm.ratchet import Ratchet, RatchetError, actuated_joints
 from ihm.resistance import simulated_resistance
 from stability import GraspError
@@ -201,3 +203,32 @@ def test_map_agreement_measures() -> None:
     assert got["median_abs_log_ratio"] == pytest.approx(0.5)  # |ln 1| and |ln e|
     with pytest.raises(MapError, match="same directions"):
         agreement(pred, ResistibleMap(a[:3], a[:3], np.zeros(3, bool), 10.0, "xy", "sim"))
+
+
+def test_seat_protocol_passive_fingers_carry_reactions():
+    """load_scene(..., nonbackdrivable=True, seat=...): seat lightly, ratchet, then preload
+    finger 1 alone. The thumb and finger 2, commanded 0, are held by their ratchets: they
+    carry contact forces with zero actuator force, and the reaction is the ratchet's limit
+    force (thesis grasp example 2: "preload applied exclusively by finger 1")."""
+    model, data = ihm.load_scene(
+        "barrett_box_3d", preload=[0, 0.1, 0, 0], nonbackdrivable=True,
+        seat=[0, 0.01, 0.01, 0.022],
+    )  # fmt: skip
+    assert np.abs(data.qvel).max() < 1e-3
+    g = grasp_from_mujoco(model, data)
+    fn = {model.body(g.hand_bodies[k]).name: g.forces[k, 0] for k in range(g.m)}
+    assert fn["f3_prox"] > 1.0 and fn["f2_prox"] > 0.5  # passive, > 10x the seat's share
+    assert data.actuator_force[model.actuator("f3").id] == 0.0
+    limit = data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT
+    held = {model.joint(j).name for j in data.efc_id[: data.nefc][limit]}
+    assert {"f2_prox", "f3_prox"} <= held
+    stops = ihm.scenes.last_ratchet.stops
+    q = data.qpos[model.jnt_qposadr[ihm.scenes.last_ratchet.joints]]
+    assert np.all(q >= stops - 2e-3)  # within the limit's softness of the stops
+
+
+def test_seat_needs_nonbackdrivable():
+    with pytest.raises(ihm.scenes.SceneError, match="seat"):
+        ihm.load_scene("barrett_box_3d", seat=[0, 0.01, 0.01, 0.02])
+    with pytest.raises(ihm.scenes.SceneError, match="seat"):
+        ihm.load_scene("barrett_box_3d", nonbackdrivable=True, seat=[0, 0.01])
