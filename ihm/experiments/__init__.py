@@ -1,0 +1,61 @@
+"""The thesis' grasp experiments (chapters 5 and 6) checked against MuJoCo physics.
+
+The thesis checked its predictions with a load cell on a real hand; we check ours against
+simulation: each experiment settles a scene (:mod:`ihm.scenes`), predicts the resistible
+load with the stability methods on the grasp read off MuJoCo (:mod:`ihm.maps`) and
+measures it by ramping the load on the object in MuJoCo (:mod:`ihm.resistance`), with the
+fingers nonbackdrivable (:mod:`ihm.ratchet`) as the thesis models the hands. Each writes
+``OUT/<name>.csv`` (one row per prediction or measurement), ``OUT/<name>.png`` and
+``OUT/<name>_summary.json`` (the agreement figures: :func:`ihm.maps.agreement`, ratios).
+
+Run ``python -m ihm.experiments NAME [NAME ...] --out docs/experiments`` (``--quick`` for
+a coarse direction grid). Names: see :data:`EXPERIMENTS`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["EXPERIMENTS", "ExperimentError", "run_experiment"]
+
+from stability import GraspError
+
+#: experiment name -> "module:function"; the function takes (out, quick, workers) and
+#: returns a JSON-serialisable summary.
+EXPERIMENTS: dict[str, str] = {
+    "barrett_box": "ihm.experiments.barrett:box",
+    "barrett_box_3d": "ihm.experiments.barrett:box_3d",
+    "barrett_cube": "ihm.experiments.barrett:cube",
+    "barrett_flask": "ihm.experiments.barrett:flask",
+    "tendon_box": "ihm.experiments.tendon:tendon_box",
+}
+
+
+class ExperimentError(GraspError):
+    """Unknown experiment name."""
+
+
+def _function(name: str) -> Callable[..., dict[str, Any]]:
+    if name not in EXPERIMENTS:
+        raise ExperimentError(
+            f"unknown experiment {name!r}; choose one of {', '.join(sorted(EXPERIMENTS))}"
+        )
+    module, func = EXPERIMENTS[name].split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def run_experiment(
+    name: str, out: str | Path = "docs/experiments", quick: bool = False, workers: int = 1
+) -> dict[str, Any]:
+    """Run experiment ``name``; writes its CSV, PNG and ``<name>_summary.json`` into ``out``
+    and returns the summary."""
+    fn = _function(name)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = fn(out, quick=quick, workers=workers)
+    (out / f"{name}_summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    return summary
