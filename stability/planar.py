@@ -27,20 +27,21 @@ three unknowns get the LP of the thesis (HiGHS). Stable iff some state admits
 a solution. ``MaxDisturbance`` is exact: along ``w = s d`` each state's
 solution is affine in ``s``, so its inequalities give an interval of ``s``
 (an LP for singular states); the answer is the largest stable ``s``.
+:func:`max_disturbance_map` answers many directions at once against the same states.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ._arrangement import affine_faces, central_faces, dedupe_planes
 from ._lp import INF, solve_lp
-from .api import register
+from .api import _METHODS, register
 from .errors import GraspError, MethodError
 from .grasp import Grasp, cross2
 from .queries import Existence, MaxDisturbance, checked_base, checked_direction_cap
@@ -53,6 +54,7 @@ __all__ = [
     "count_slip_faces",
     "motion_planes",
     "slip_states_thesis",
+    "max_disturbance_map",
 ]
 
 STATE_NAMES = {(1, 0): "roll", (1, 1): "slip+", (1, -1): "slip-"}
@@ -333,6 +335,7 @@ class _Prep:
     inv: NDArray[np.float64]  # (K_square, 3, 3) its inverse
     rest: NDArray[np.intp]  # singular systems
     U_perp: NDArray[np.float64]  # (K_rest, 3, 3) left singular vectors, masked off the range
+    M_rest: NDArray[np.float64]  # (K_rest, 3, 3) the singular systems themselves
 
     def __len__(self) -> int:
         return len(self.S)
@@ -415,7 +418,26 @@ def _prepare(ctx: _Ctx, S: NDArray[np.int8], P: NDArray[np.bool_]) -> _Prep:
             U_perp[low[one], :, 1] = u[one]
             U_perp[low[one], :, 2] = v[one]
             U_perp[low[~one]] = np.eye(3)
-    return _Prep(S, P, B, nmot, nrp, ridx, h, many, square, inv, rest, U_perp)
+    return _Prep(S, P, B, nmot, nrp, ridx, h, many, square, inv, rest, U_perp, M[rest])
+
+
+def _singular_screen(e0, e1, rhs0_max, d_max, s_max: float):
+    """Range test of singular systems: ``(solvable, s_ub)``, elementwise over leading axes.
+
+    ``e0 + s e1`` (last axis) are the components of the right-hand side off the range
+    of ``M``; equilibrium is solvable for some ``s`` in ``[0, s_max]`` iff they vanish
+    (to ``eps`` of the right-hand side) at the least-squares ``s``, which bounds the
+    state's stable ``s`` (``s_max`` when ``e1 = 0``, any ``s``).
+    """
+    etol = _EPS * (rhs0_max + (1.0 + s_max) * d_max)
+    n1 = _last(np.add, e1**2)
+    s_star = np.clip(-_last(np.add, e0 * e1) / np.maximum(n1, 1e-300), 0.0, s_max)
+    resid = np.where(
+        n1 > 0,
+        _last(np.maximum, np.abs(e0 + s_star[..., None] * e1)),
+        _last(np.maximum, np.abs(e0)),
+    )
+    return resid <= etol, np.where(n1 > 0, s_star, s_max)
 
 
 def _batch(ctx: _Ctx, pr: _Prep, s_max: float = 0.0):
@@ -441,19 +463,15 @@ def _batch(ctx: _Ctx, pr: _Prep, s_max: float = 0.0):
     Z0[sq], Z1[sq] = Z[..., 0], Z[..., 1]
     rest = pr.rest
     if len(rest):
-        # singular: the LP is needed only if equilibrium is solvable for some s, i.e.
-        # rhs0 + s rhs1 lies in range(M) (components e0 + s e1 off the range vanish)
-        e0 = np.einsum("kai,ka->ki", pr.U_perp, rhs0[rest])
-        e1 = np.einsum("kai,ka->ki", pr.U_perp, rhs1[rest])
-        etol = _EPS * (np.abs(rhs0[rest]).max(axis=1) + (1.0 + s_max) * np.abs(ctx.d).max())
-        n1 = (e1**2).sum(axis=1)
-        s_star = np.clip(-(e0 * e1).sum(axis=1) / np.maximum(n1, 1e-300), 0.0, s_max)
-        resid = np.where(
-            n1 > 0, np.abs(e0 + s_star[:, None] * e1).max(axis=1), np.abs(e0).max(axis=1)
+        solvable, s_ub[rest] = _singular_screen(
+            np.einsum("kai,ka->ki", pr.U_perp, rhs0[rest]),
+            np.einsum("kai,ka->ki", pr.U_perp, rhs1[rest]),
+            np.abs(rhs0[rest]).max(axis=1),
+            np.abs(ctx.d).max(),
+            s_max,
         )
-        lp[rest[resid <= etol]] = True
-        skip[rest[resid > etol]] = True
-        s_ub[rest] = np.where(n1 > 0, s_star, s_max)
+        lp[rest[solvable]] = True
+        skip[rest[~solvable]] = True
     r0 = (pr.B @ Z0[:, :, None])[..., 0]
     r1 = (pr.B @ Z1[:, :, None])[..., 0]
     ct0 = np.zeros((K, m))
@@ -503,6 +521,23 @@ def _forces(ctx: _Ctx, S, P, r, ct):
     return np.stack([cn, c_t], axis=-1)
 
 
+def _rows(op, x: NDArray[Any], initial: Any = None) -> NDArray[Any]:
+    """``op.reduce(x, axis=1)`` (with ``initial``), column by column for few columns:
+    numpy reduces a short last axis row by row, an order of magnitude slower here.
+    Exact for the ops used (maximum, minimum, logical_or)."""
+    if x.shape[1] > 16 or x.shape[1] == 0:
+        return op.reduce(x, axis=1) if initial is None else op.reduce(x, axis=1, initial=initial)
+    out = x[:, 0].copy() if initial is None else np.full(len(x), initial, dtype=x.dtype)
+    for j in range(0 if initial is not None else 1, x.shape[1]):
+        op(out, x[:, j], out=out)
+    return out
+
+
+def _last(op, x: NDArray[Any]) -> NDArray[Any]:
+    """``op.reduce(x, axis=-1)`` through :func:`_rows`."""
+    return _rows(op, x.reshape(-1, x.shape[-1])).reshape(x.shape[:-1])
+
+
 def _stage_bounds(g0, g1, e0, e1, lo, hi, hx, s_max):
     """Tighten ``[lo, hi]`` and ``hx`` by the row ``g0 + s g1 >= 0`` on ``s in [0, s_max]``.
 
@@ -519,35 +554,38 @@ def _stage_bounds(g0, g1, e0, e1, lo, hi, hx, s_max):
     with np.errstate(divide="ignore", invalid="ignore"):
         bound = -a0 / a1
         exact = -g0 / g1
-    lo = np.maximum(lo, np.max(np.where(pos, bound, 0.0), axis=1, initial=0.0))
-    hi = np.minimum(hi, np.min(np.where(neg, bound, s_max), axis=1, initial=s_max))
+    lo = np.maximum(lo, _rows(np.maximum, np.where(pos, bound, 0.0), 0.0))
+    hi = np.minimum(hi, _rows(np.minimum, np.where(neg, bound, s_max), s_max))
     steep = g1 < -e1
-    hx = np.minimum(hx, np.min(np.where(steep, exact, s_max), axis=1, initial=s_max))
-    bad = np.any(~pos & ~neg & (a0 < 0), axis=1)
+    hx = np.minimum(hx, _rows(np.minimum, np.where(steep, exact, s_max), s_max))
+    bad = _rows(np.logical_or, ~pos & ~neg & (a0 < 0), False)
     return lo, np.where(bad, -np.inf, hi), hx
 
 
-def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
+def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive, d=None):
     """For each state, the interval of ``s in [0, s_max]`` where its solution holds.
 
     Conditions (all closed, relative tolerance ``ctx.tol`` per unit of
     motion, see :func:`_stage_bounds`), checked in stages on the surviving
     states only: contact normal state, slip direction and rolling, friction
     cone of rolling contacts, and equilibrium. Returns ``(feasible, s_hi)``
-    with ``s_hi`` the largest feasible ``s`` (exact up to round-off).
+    with ``s_hi`` the largest feasible ``s`` (exact up to round-off). ``d``: the
+    wrench per unit ``s``, ``ctx.d`` by default, or one row per state (direction sweeps).
     """
     K = len(S)
+    d = ctx.d if d is None else d
     lo = np.zeros(K)
     hi = np.full(K, s_max)
     hx = np.full(K, s_max)
     hi[~alive] = -np.inf
-    e0 = ctx.tol + _EPS * np.abs(r0).max(axis=1)
-    e1 = _EPS * (np.abs(ctx.d).max() + np.abs(r1).max(axis=1))
+    e0 = ctx.tol + _EPS * _rows(np.maximum, np.abs(r0))
+    d_max = np.abs(d).max() if d.ndim == 1 else _rows(np.maximum, np.abs(d))
+    e1 = _EPS * (d_max + _rows(np.maximum, np.abs(r1)))
 
     def live():
         return np.flatnonzero(lo <= hi)
 
-    fixed = s_max == 0.0 and not np.any(ctx.d)  # Existence: only s = 0 matters
+    fixed = s_max == 0.0 and not np.any(d)  # Existence: only s = 0 matters
 
     def update(idx, g0, g1):
         if fixed:
@@ -587,7 +625,7 @@ def _intervals(ctx: _Ctx, S, P, r0, r1, ct0, ct1, s_max: float, alive):
             np.where(roll, ctx.mu * cn1 - sign * ct_1, 0.0),
         )
     q0 = cn0 @ ctx.Gn + ct_0 @ ctx.Gt + ctx.w0
-    q1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + ctx.d
+    q1 = cn1 @ ctx.Gn + ct_1 @ ctx.Gt + (d if d.ndim == 1 else d[idx])
     keep = lo[idx] <= hi[idx]
     idx, q0, q1 = idx[keep], q0[keep], q1[keep]
     update(idx, q0, q1)
@@ -694,13 +732,8 @@ def _solution(grasp, query, ctx, S, P, r, ct, s, stable, value, stats) -> Soluti
     spatial=False,
     summary="thesis ch. 4: exact, polynomial-time enumeration of co-occurring states",
 )
-def _solve_planar(
-    grasp: Grasp, query: Existence | MaxDisturbance, chunk: int = 8192, **options: Any
-) -> Solution:
-    if options:
-        raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
-    if not isinstance(chunk, int | np.integer) or chunk < 1:
-        raise GraspError(f"option chunk must be a positive integer, got {chunk!r}")
+def _solve_planar(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
+    chunk = _options(options)
     p = _preload(grasp, query.preload)
     # Work in units where the grasp has size 1: the model is invariant under
     # points -> points / L with torques / L and rotations * L, and tolerances
@@ -718,6 +751,16 @@ def _solve_planar(
     if sol.motion is not None:
         sol.motion = sol.motion * scale  # theta = theta_unit / L
     return sol
+
+
+def _options(options: dict[str, Any]) -> int:
+    """The planar method's options: ``chunk`` (states per batch, default 8192)."""
+    chunk = options.pop("chunk", 8192)
+    if options:
+        raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
+    if not isinstance(chunk, int | np.integer) or chunk < 1:
+        raise GraspError(f"option chunk must be a positive integer, got {chunk!r}")
+    return int(chunk)
 
 
 def _unit_grasp(grasp: Grasp) -> tuple[float, Grasp]:
@@ -801,6 +844,421 @@ def _max_disturbance(grasp, query, p, d, cap, chunk, base=None) -> Solution:
     stats["capped"] = bool(value >= cap * (1 - 1e-12))
     S, P, r, ct = best[1]
     return _solution(grasp, query, ctx, S, P, r, ct, value, True, value, stats)
+
+
+# ----------------------------------------------------------------------------------------
+# direction sweeps: MaxDisturbance for many directions at once (resistible-force maps)
+
+_SWEEP_ROWS = 32_768  # (state, direction) rows per vectorised block
+_PRECHECK_RTOL = 1e-6  # margin of the LP precheck, relative to the forces and motions involved
+_PIN_RTOL = 1e-3  # s counts as pinned by equilibrium when |e1| >= this * |d|
+
+
+@dataclass
+class _Sweep:
+    """The distinct states of ``(grasp, preload)``, split for direction sweeps.
+
+    ``S, P, B, C, h, inv``: states with a nonsingular system, whose solution is affine
+    in ``s`` for every direction (as in :class:`_Prep`, with ``c_t = C z``); ``r*`` and
+    ``U_perp``: singular systems (LP states where the range test passes); ``m*``: more
+    than three unknowns (always LP states). For the singular states of rank 2, ``pinv``
+    and ``null`` (pseudo-inverse and unit null vector of ``M``) serve the precheck that
+    spares the LP where equilibrium pins ``s`` and the state's conditions have no
+    solution there; ``fixed`` marks the states with more unknowns whose rolling
+    contacts hold the object still (generic for ``m >= 4``: all rolling), where the
+    stable wrenches form a zonotope (:func:`_zonotope_bounds`).
+    """
+
+    S: NDArray[np.int8]
+    P: NDArray[np.bool_]
+    B: NDArray[np.float64]
+    C: NDArray[np.float64]  # (K, m, 3): rolling friction c_t = C z
+    h: NDArray[np.float64]
+    inv: NDArray[np.float64]
+    rS: NDArray[np.int8]
+    rP: NDArray[np.bool_]
+    rB: NDArray[np.float64]
+    rC: NDArray[np.float64]
+    rh: NDArray[np.float64]
+    U_perp: NDArray[np.float64]
+    pinv: NDArray[np.float64]  # (K_rest, 3, 3)
+    null: NDArray[np.float64]  # (K_rest, 3)
+    rank2: NDArray[np.bool_]  # null space of dimension 1 (precheck applies)
+    mS: NDArray[np.int8]
+    mP: NDArray[np.bool_]
+    mh: NDArray[np.float64]  # (K_many, 3) preload wrench
+    fixed: NDArray[np.bool_]  # (K_many,) rolling contacts pin the motion to r = 0
+
+
+def _friction_selector(pr: _Prep, m: int) -> NDArray[np.float64]:
+    """(K, m, 3) 0/1 matrices with ``c_t = C z`` for the rolling, persisting contacts."""
+    K = len(pr)
+    C = np.zeros((K, m, 3))
+    rows = np.arange(K)
+    for j in range(pr.ridx.shape[1]):
+        col = pr.nmot + j
+        sel = (j < pr.nrp) & (col < 3)
+        C[rows[sel], pr.ridx[sel, j], col[sel]] = 1.0
+    return C
+
+
+def _distinct(S: NDArray[np.int8], P: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """Indices of the first occurrence of each distinct ``(S, P)`` row, in order."""
+    if len(S) == 0:
+        return np.zeros(0, dtype=np.intp)
+    _, first = np.unique(np.concatenate([S, P.astype(np.int8)], axis=1), axis=0, return_index=True)
+    return np.sort(first)
+
+
+def _sweep_states(grasp: Grasp, ctx: _Ctx, p: NDArray[np.float64], chunk: int) -> _Sweep:
+    """:class:`_Sweep` of ``(grasp, preload)``, cached on the grasp next to :func:`_prepared`."""
+    cache: dict[bytes, _Sweep] = grasp.__dict__.setdefault("_planar_sweep", {})
+    key = p.tobytes()
+    if key in cache:
+        return cache[key]
+    m = grasp.m
+    parts: dict[str, list[NDArray[Any]]] = {k: [] for k in (*_Sweep.__dataclass_fields__, "M")}
+    for pr in _prepared(grasp, ctx, p, chunk):
+        C = _friction_selector(pr, m)
+        sq = np.flatnonzero(pr.square)
+        for name, val in zip(
+            ("S", "P", "B", "C", "h", "inv"),
+            (pr.S[sq], pr.P[sq], pr.B[sq], C[sq], pr.h[sq], pr.inv),
+            strict=True,
+        ):
+            parts[name].append(val)
+        r = pr.rest
+        for name, val in zip(
+            ("rS", "rP", "rB", "rC", "rh", "U_perp", "M"),
+            (pr.S[r], pr.P[r], pr.B[r], C[r], pr.h[r], pr.U_perp, pr.M_rest),
+            strict=True,
+        ):
+            parts[name].append(val)
+        many = np.flatnonzero(pr.many)
+        parts["mS"].append(pr.S[many])
+        parts["mP"].append(pr.P[many])
+        parts["mh"].append(pr.h[many])
+        parts["fixed"].append(pr.nmot[many] == 0)
+    cat = {k: np.concatenate(v) for k, v in parts.items() if v}
+    keep = _distinct(cat["S"], cat["P"])
+    for k in ("S", "P", "B", "C", "h", "inv"):
+        cat[k] = cat[k][keep]
+    keep = _distinct(cat["rS"], cat["rP"])
+    for k in ("rS", "rP", "rB", "rC", "rh", "U_perp", "M"):
+        cat[k] = cat[k][keep]
+    keep = _distinct(cat["mS"], cat["mP"])
+    for k in ("mS", "mP", "mh", "fixed"):
+        cat[k] = cat[k][keep]
+    # r = 0 only when the rolling contacts' tangential planes meet well away from rank 3
+    roll = cat["mS"] == 0
+    if len(roll) and m >= 3:
+        sv = np.linalg.svd(ctx.That[None] * roll[:, :, None], compute_uv=False)
+        cat["fixed"] &= sv[:, 2] >= 1e-3
+    else:
+        cat["fixed"][:] = False
+    # rank-2 singular systems: pseudo-inverse on the range, unit null vector
+    M = cat.pop("M")
+    U, sv, Vt = np.linalg.svd(M) if len(M) else (M, np.zeros((0, 3)), M)
+    rank2 = (sv[:, 1] > 1e-9 * sv[:, 0]) & ~np.any(cat["U_perp"][:, :, :2], axis=(1, 2))
+    inv_sv = np.where(rank2[:, None], 1.0 / np.where(sv[:, :2] > 0, sv[:, :2], 1.0), 0.0)
+    cat["pinv"] = np.einsum("kai,ka,kja->kij", Vt[:, :2, :], inv_sv, U[:, :, :2])
+    cat["null"] = Vt[:, 2, :]
+    cat["rank2"] = rank2
+    sweep = _Sweep(**cat)
+    if len(cache) >= _CACHE_PRELOADS:
+        cache.pop(next(iter(cache)))
+    cache[key] = sweep
+    return sweep
+
+
+def _certified_rows(ctx: _Ctx, S, P, r, ct, s, d, rtol: float = 1e-7) -> NDArray[np.bool_]:
+    """:func:`_certified` for many candidates at once: rows of states, motions, friction,
+    ``s`` and directions ``d`` (wrench ``w0 + s d``); the same residuals and tolerances."""
+    n, m = S.shape
+    c = _forces(ctx, S, P, r, ct)
+    w = ctx.w0 + s[:, None] * d
+    tol = rtol * (
+        np.abs(w).max(axis=1) + ctx.p.max(initial=0.0) + np.abs(c).max(axis=(1, 2)) + 1e-300
+    )
+    G = ctx.grasp.G
+    cn, c_t = c[..., 0], c[..., 1]
+    mot = (r @ G).reshape(n, m, 2)
+    dn, dt = mot[..., 0], mot[..., 1]
+    worst = np.max(
+        [
+            np.abs(c.reshape(n, -1) @ G.T + w).max(axis=1),  # equilibrium
+            np.maximum(0.0, -cn).max(axis=1),  # normal sign
+            np.maximum(0.0, np.abs(c_t) - ctx.mu * cn).max(axis=1),  # friction cone
+            np.abs(cn - np.maximum(0.0, ctx.p - dn)).max(axis=1),  # spring law
+        ],
+        axis=0,
+    )
+    dissipation = np.abs(c_t * dt + ctx.mu * cn * np.abs(dt)).max(axis=1)
+    return (worst <= tol) & (dissipation <= tol * np.abs(r).max(axis=1))
+
+
+def _sweep_square(ctx: _Ctx, sw: _Sweep, D: NDArray[np.float64], cap: float):
+    """Best certified ``s`` per direction over the square states: ``(found, best)``.
+
+    All (state, direction) pairs go through :func:`_intervals` at once; per direction
+    the candidates are certified best first, as in :func:`_max_disturbance`.
+    """
+    K, nd = len(sw.S), len(D)
+    found = np.zeros(nd, dtype=bool)
+    best = np.full(nd, -1.0)
+    if K == 0 or nd == 0:
+        return found, best
+    rhs0 = -(sw.h + ctx.w0)
+    Z0 = (sw.inv @ rhs0[:, :, None])[..., 0]
+    r0 = (sw.B @ Z0[:, :, None])[..., 0]
+    ct0 = (sw.C @ Z0[:, :, None])[..., 0]
+    step = max(1, _SWEEP_ROWS // K)
+    for a in range(0, nd, step):
+        Db = D[a : a + step]
+        nb = len(Db)
+        Z1 = -(sw.inv @ Db.T)  # (K, 3, nb)
+        r1 = (sw.B @ Z1).transpose(0, 2, 1).reshape(-1, 3)
+        ct1 = (sw.C @ Z1).transpose(0, 2, 1).reshape(-1, ctx.grasp.m)
+        S = np.repeat(sw.S, nb, axis=0)
+        P = np.repeat(sw.P, nb, axis=0)
+        R0 = np.repeat(r0, nb, axis=0)
+        CT0 = np.repeat(ct0, nb, axis=0)
+        d_rows = np.tile(Db, (K, 1))
+        feas, hi = _intervals(ctx, S, P, R0, r1, CT0, ct1, cap, np.ones(K * nb, bool), d_rows)
+        H = np.where(feas, hi, -np.inf).reshape(K, nb)
+        todo = np.arange(nb)
+        while len(todo):
+            k = np.argmax(H[:, todo], axis=0)
+            s = H[k, todo]
+            live = s > -np.inf
+            todo, k, s = todo[live], k[live], s[live]
+            if not len(todo):
+                break
+            rows = k * nb + todo
+            ok = _certified_rows(
+                ctx, S[rows], P[rows], R0[rows] + s[:, None] * r1[rows],
+                CT0[rows] + s[:, None] * ct1[rows], s, Db[todo],
+            )  # fmt: skip
+            found[a + todo[ok]] = True
+            best[a + todo[ok]] = s[ok]
+            H[k[~ok], todo[~ok]] = -np.inf  # rejected: the next best state of the direction
+            todo = todo[~ok]
+    return found, best
+
+
+def _precheck(ctx: _Ctx, sw: _Sweep, k, s, d) -> NDArray[np.bool_]:
+    """Whether the LP of rank-2 singular state ``k`` may have a solution at the ``s`` that
+    equilibrium pins, per pair (``k``, ``s``, ``d`` rows).
+
+    At that ``s`` the solutions of the state's system form a line ``z = z_p + t n``;
+    every condition of :func:`_intervals` is affine in ``t``. False only when no ``t``
+    satisfies them all, each relaxed by ``_PRECHECK_RTOL`` of the forces and motions
+    involved, so that a "no" is one the LP would give too (the tests hold it to HiGHS).
+    """
+    if len(k) == 0:
+        return np.zeros(0, dtype=bool)
+    S, P = sw.rS[k], sw.rP[k]
+    w = ctx.w0 + s[:, None] * d
+    zp = (sw.pinv[k] @ (-(sw.rh[k] + w))[:, :, None])[..., 0]
+    nv = sw.null[k]
+    Bk, Ck = sw.rB[k], sw.rC[k]
+    ra, rb = (Bk @ zp[:, :, None])[..., 0], (Bk @ nv[:, :, None])[..., 0]
+    cta, ctb = (Ck @ zp[:, :, None])[..., 0], (Ck @ nv[:, :, None])[..., 0]
+    cn_a = np.where(P, ctx.p - ra @ ctx.N.T, 0.0)
+    cn_b = np.where(P, -(rb @ ctx.N.T), 0.0)
+    ct_a = np.where(S == 0, cta, -ctx.mu * S * cn_a)
+    ct_b = np.where(S == 0, ctb, -ctx.mu * S * cn_b)
+    sg = np.where(P, -1.0, 1.0)
+    dTa, dTb = ra @ ctx.T.T, rb @ ctx.T.T
+    roll = S == 0
+    rp = roll & P
+    q_a = cn_a @ ctx.Gn + ct_a @ ctx.Gt + w
+    q_b = cn_b @ ctx.Gn + ct_b @ ctx.Gt
+    g0 = np.concatenate(
+        [sg * (ra @ ctx.N.T - ctx.p), S * dTa, np.where(roll, dTa, 0.0),
+         np.where(roll, -dTa, 0.0), np.where(rp, ctx.mu * cn_a - ct_a, 0.0),
+         np.where(rp, ctx.mu * cn_a + ct_a, 0.0), q_a, -q_a],
+        axis=1,
+    )  # fmt: skip
+    g1 = np.concatenate(
+        [sg * (rb @ ctx.N.T), S * dTb, np.where(roll, dTb, 0.0), np.where(roll, -dTb, 0.0),
+         np.where(rp, ctx.mu * cn_b - ct_b, 0.0), np.where(rp, ctx.mu * cn_b + ct_b, 0.0),
+         q_b, -q_b],
+        axis=1,
+    )  # fmt: skip
+    size = np.abs(w).max(axis=1) + ctx.p.max(initial=0.0) + np.abs(zp).max(axis=1)
+    a0 = g0 + (_PRECHECK_RTOL * (1.0 + size))[:, None]  # row holds when a0 + t g1 >= 0
+    flat = np.abs(g1) <= 1e-12 * (1.0 + np.abs(g0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = -a0 / g1
+    lo = np.max(np.where(~flat & (g1 > 0), bound, -np.inf), axis=1)
+    hi = np.min(np.where(~flat & (g1 < 0), bound, np.inf), axis=1)
+    bad = np.any(flat & (a0 < 0), axis=1)
+    return ~bad & (lo <= hi + _PRECHECK_RTOL * (1.0 + np.abs(lo) + np.abs(hi)))
+
+
+def _zonotope_bounds(ctx: _Ctx, sw: _Sweep, D, cap: float):
+    """``(feasible, s_hi)``, (K_fixed, N) each: the LP of the ``fixed`` states, per direction.
+
+    With ``r = 0`` the state's stable wrenches ``s d`` form the zonotope ``V = -(h + w0)
+    + sum_i [-mu_i p_i, mu_i p_i] Gt_i`` over its rolling, persisting contacts, and the
+    LP is a ray cast: ``s (a . d) <= h_V(a)`` for every unit ``a``, ``h_V`` the support
+    function. Unit cross products of the contacts' ``Gt`` pairs (and the axes) hold the
+    facet normals, so ``s_hi`` is the LP's value up to round-off (``1e-13`` slack, never
+    below it) where the LP is feasible; ``feasible`` is False only with
+    ``_PRECHECK_RTOL`` slack (the LP has no solution). Rows: the states ``sw.fixed`` selects.
+    """
+    Gt = ctx.Gt
+    m = len(Gt)
+    i, j = np.triu_indices(m, 1)
+    A = np.concatenate([np.cross(Gt[i], Gt[j]), np.eye(3)])
+    A = A[np.linalg.norm(A, axis=1) > 1e-12]
+    A /= np.linalg.norm(A, axis=1, keepdims=True)
+    A = np.concatenate([A, -A])  # (F, 3)
+    S, P = sw.mS[sw.fixed], sw.mP[sw.fixed]
+    rho = np.where((S == 0) & P, ctx.mu * ctx.p, 0.0)  # (K, m) half-widths
+    c0 = -(sw.mh[sw.fixed] + ctx.w0)
+    H = c0 @ A.T + rho @ np.abs(A @ Gt.T).T  # (K, F) support function
+    size = np.abs(c0).max(axis=1) + rho @ np.linalg.norm(Gt, axis=1)
+    AD = A @ D.T  # (F, N)
+    tau = 1e-9 * np.abs(D).max(axis=1)
+    up, down = AD > tau, AD < -tau
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tight = (H + 1e-13 * (1.0 + size)[:, None])[:, :, None] / AD
+        loose = (H + _PRECHECK_RTOL * (1.0 + size)[:, None])[:, :, None] / AD
+    s_hi = np.minimum(cap, np.min(np.where(up, tight, np.inf), axis=1))
+    s_out = np.minimum(cap, np.min(np.where(up, loose, np.inf), axis=1))
+    s_in = np.maximum(0.0, np.max(np.where(down, loose, -np.inf), axis=1))
+    flat_bad = np.any(
+        ~up & ~down & (H + _PRECHECK_RTOL * (1.0 + size)[:, None] < 0)[:, :, None], axis=1
+    )
+    return ~flat_bad & (s_in <= s_out), s_hi
+
+
+def _singular_bounds(ctx: _Ctx, sw: _Sweep, D, cap: float):
+    """The range test of :func:`_batch` for every singular state and direction.
+
+    Returns ``(solvable, s_ub, pinned)``, (K_rest, N) each: the LP is needed,
+    its bound on ``s``, and whether equilibrium pins ``s`` (rank 2, the right-hand
+    side's component off the range grows with ``s``) so that :func:`_precheck` applies.
+    """
+    rhs0 = -(sw.rh + ctx.w0)
+    e0 = np.einsum("kai,ka->ki", sw.U_perp, rhs0)  # (Kr, 3)
+    e1 = -np.einsum("kai,ja->kji", sw.U_perp, D)  # (Kr, N, 3)
+    d_max = np.abs(D).max(axis=1)
+    solvable, s_ub = _singular_screen(
+        e0[:, None, :], e1, np.abs(rhs0).max(axis=1)[:, None], d_max[None, :], cap
+    )
+    pinned = sw.rank2[:, None] & (np.abs(e1[:, :, 2]) >= _PIN_RTOL * d_max[None, :])
+    return solvable, s_ub, pinned
+
+
+def _sweep_lp(ctx, sw: _Sweep, D, cap: float, found, best) -> int:
+    """The LP states of :func:`_max_disturbance`, per direction, in place on ``found``,
+    ``best``: only those whose bound beats the best so far and that pass the precheck
+    reach :func:`_lp_state`. Returns the number of LPs solved."""
+    nd = len(D)
+    pending: list[list[tuple[float, NDArray[np.int8], NDArray[np.bool_]]]] = [[] for _ in range(nd)]
+    margin = best + 1e-12 * (1.0 + best)
+    if len(sw.rS):
+        solvable, s_ub, pin = _singular_bounds(ctx, sw, D, cap)
+        k, j = np.nonzero(solvable & (s_ub > margin[None, :]))
+        if len(k):
+            pinned = pin[k, j]
+            maybe = np.ones(len(k), dtype=bool)
+            maybe[pinned] = _precheck(ctx, sw, k[pinned], s_ub[k[pinned], j[pinned]], D[j[pinned]])
+            for kk, jj in zip(k[maybe], j[maybe], strict=True):
+                pending[jj].append((float(s_ub[kk, jj]), sw.rS[kk], sw.rP[kk]))
+    if len(sw.mS):
+        may = np.repeat((cap > margin)[None, :], len(sw.mS), axis=0)
+        if sw.fixed.any():
+            feasible, s_hi = _zonotope_bounds(ctx, sw, D, cap)
+            may[sw.fixed] = feasible & (s_hi > margin[None, :])
+        for kk, jj in zip(*np.nonzero(may), strict=True):
+            pending[jj].append((cap, sw.mS[kk], sw.mP[kk]))
+    n_lp = 0
+    for jj in range(nd):
+        if not pending[jj]:
+            continue
+        cj = replace(ctx, d=D[jj])
+        b = best[jj]
+        for ub, S_k, P_k in sorted(pending[jj], key=lambda x: -x[0]):
+            if ub <= b + 1e-12 * (1.0 + b):
+                break
+            n_lp += 1
+            res = _lp_state(cj, S_k, P_k, (0.0, min(ub, cap)), sense=1)
+            if res is not None and res[2] > b and _certified(cj, S_k, P_k, *res):
+                b = res[2]
+                found[jj] = True
+        best[jj] = b
+    return n_lp
+
+
+def max_disturbance_map(
+    grasp: Grasp,
+    directions: ArrayLike,
+    preload: float | ArrayLike | None = None,
+    commands: ArrayLike | None = None,
+    cap: float = 1e3,
+    base: ArrayLike | None = None,
+    **options: Any,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
+    """``MaxDisturbance`` of the planar method for many directions at once.
+
+    For each row ``d`` of ``directions`` ((N, 3) wrenches ``(fx, fy, tz)`` [N, N m]
+    applied to the object about its frame's origin, any non-zero length) the largest
+    ``s`` in ``[0, cap]`` such that ``w = base + s d`` is stable: the same answer as
+    ``solve(grasp, MaxDisturbance(direction=d, preload=preload, commands=commands,
+    cap=cap, base=base), method="planar")``. The contact states are enumerated and
+    factorised once (cached on the grasp per preload, as for ``solve``) and every
+    nonsingular state's interval of ``s`` is evaluated for all directions together
+    (numpy); the LP states are screened for all directions (range test, a precheck
+    where equilibrium pins ``s``, a zonotope ray cast where rolling contacts hold the
+    object still) and HiGHS gets only what these cannot settle, direction by direction.
+
+    Returns ``(values, capped, stable)``, each (N,): ``values`` the largest stable
+    ``s`` (in units of ``d``: N when ``d`` is a unit force), 0 where no ``s`` is stable;
+    ``capped`` True where the value reached ``cap`` (resists *at least* ``cap``);
+    ``stable`` False where no ``s`` in ``[0, cap]`` is stable. ``preload`` [N] is a
+    scalar or one value per contact. The planar method models a rigid hand:
+    ``commands`` must be None (:class:`MethodError` otherwise, as from ``solve``).
+    ``options``: those of the planar method (``chunk``).
+    """
+    _require_planar(grasp)
+    try:
+        dirs = np.asarray(directions, dtype=float)
+    except (TypeError, ValueError):
+        dirs = None
+    if dirs is None or dirs.ndim != 2 or dirs.shape[1] != grasp.wrench_dim:
+        shape = None if dirs is None else dirs.shape
+        raise GraspError(
+            f"directions must be an (N, {grasp.wrench_dim}) array of wrenches, got "
+            f"{shape if shape is not None else type(directions).__name__}"
+        )
+    if not np.all(np.isfinite(dirs)):
+        raise GraspError("directions must be finite")
+    zero = np.flatnonzero(~np.any(dirs != 0.0, axis=1))
+    if len(zero):
+        raise GraspError(f"MaxDisturbance direction must be non-zero (rows {zero.tolist()})")
+    probe = dirs[0] if len(dirs) else np.eye(grasp.wrench_dim)[0]
+    query = MaxDisturbance(probe, preload=preload, commands=commands, cap=cap, base=base)
+    reason = _METHODS["planar"].refuses(grasp, query)
+    if reason is not None:
+        raise MethodError(f"method 'planar' {reason}")
+    chunk = _options(dict(options))
+    _, cap_f = checked_direction_cap(grasp, query)
+    w0 = checked_base(grasp, query)
+    p = _preload(grasp, preload)
+    L, unit = _unit_grasp(grasp)
+    scale = np.array([1.0, 1.0, 1.0 / L])
+    D = dirs * scale
+    ctx = _Ctx.make(unit, p, w0 * scale, np.zeros(3))
+    sw = _sweep_states(unit, ctx, p, chunk)
+    found, best = _sweep_square(ctx, sw, D, cap_f)
+    _sweep_lp(ctx, sw, D, cap_f, found, best)
+    values = np.where(found, np.minimum(best, cap_f), 0.0)
+    capped = found & (values >= cap_f * (1 - 1e-12))
+    return values, capped, found
 
 
 def slip_states_thesis(grasp: Grasp) -> NDArray[np.int8]:
