@@ -112,6 +112,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     mp_.add_argument("--directions", type=int, default=360, help="directions (default 360)")
     mp_.add_argument(
+        "--frame",
+        default="world",
+        help="axes of --plane: world (palm frame, default) or object (the object's axes at "
+        "rest: the thesis' axes as each scene documents them)",
+    )
+    mp_.add_argument(
         "--preload",
         type=float,
         nargs="+",
@@ -232,7 +238,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
     try:
         for method in args.method:
-            _check(args.plane, method, args.directions, args.workers, args.cap)
+            _check(args.plane, method, args.directions, args.workers, args.cap, args.frame)
         preloads = args.preload or [None]
         opts: dict[str, float] = {} if args.time_limit is None else {"time_limit": args.time_limit}
         if args.normal_uncertainty is not None:
@@ -244,7 +250,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
         csv_path, png, walls, agree = run(
             args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
             args.cap, args.workers, args.out, progress=not args.no_progress,
-            methods=args.method, seat=args.seat, **opts,
+            methods=args.method, seat=args.seat, frame=args.frame, **opts,
         )  # fmt: skip
     except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
         print(f"{PROG} map: error: {exc}", file=sys.stderr)

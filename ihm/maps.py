@@ -56,7 +56,11 @@ class MapError(GraspError):
     """Bad map options: unknown plane or method, bad direction count, workers or cap."""
 
 
-def _check(plane: str, method: str, directions: int, workers: int, cap: float) -> None:
+FRAMES = ("world", "object")
+
+
+def _check(plane: str, method: str, directions: int, workers: int, cap: float,
+           frame: str = "world") -> None:  # fmt: skip
     try:
         plane_axes(plane)
     except GraspError as exc:
@@ -67,6 +71,8 @@ def _check(plane: str, method: str, directions: int, workers: int, cap: float) -
         raise MapError(f"directions and workers must be >= 1, got {directions}, {workers}")
     if not (np.isfinite(cap) and cap > 0):
         raise MapError(f"cap must be a finite number > 0, got {cap}")
+    if frame not in FRAMES:
+        raise MapError(f"unknown frame {frame!r}; choose one of {', '.join(FRAMES)}")
 
 
 def _directions(plane: str, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -88,15 +94,15 @@ _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION  # positions, velocities, controls, 
 
 def _settled_state(
     scene: str, preload: Any, nonbackdrivable: bool, seat: Any
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Settle the scene (errors surface here, in the calling process); its state and, when
-    nonbackdrivable, the ratchet's stops."""
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Settle the scene (errors surface here, in the calling process); its state, the
+    ratchet's stops (None unless nonbackdrivable) and the object's orientation at rest."""
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
                                     seat=seat)  # fmt: skip
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
     stops = None if scenes.last_ratchet is None else scenes.last_ratchet.stops.copy()
-    return state, stops
+    return state, stops, data.xmat[model.body("object").id].reshape(3, 3).copy()
 
 
 def _init(scene: str, state: np.ndarray, stops: np.ndarray | None) -> None:
@@ -132,6 +138,7 @@ def simulated_map(
     preload: ArrayLike | None = None,
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
+    frame: str = "world",
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
@@ -142,15 +149,19 @@ def simulated_map(
     ``preload``: commanded actuator forces (default: the scene's ``ihm_preload``);
     ``nonbackdrivable``: ratchet the motor joints and actuated tendons
     (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
-    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``resistance_kwargs`` go to
+    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``frame``: the plane's
+    axes are the world's (``"world"``) or the object's at rest (``"object"``: the thesis'
+    axes, as each scene documents them); ``resistance_kwargs`` go to
     :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
     """
-    _check(plane, "sim", directions, workers, cap)
+    _check(plane, "sim", directions, workers, cap, frame)
     scenes.scene_path(scene)  # unknown scene: SceneError before any worker starts
     angles, units = _directions(plane, directions)
-    dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
     pre = None if preload is None else np.asarray(preload, dtype=float)
-    state, stops = _settled_state(scene, pre, nonbackdrivable, seat)
+    state, stops, rot = _settled_state(scene, pre, nonbackdrivable, seat)
+    if frame == "object":
+        units = units @ rot.T
+    dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
     out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops), progress,
                     f"{scene} sim map")  # fmt: skip
     mags = np.array([v for v, _ in out])
@@ -195,6 +206,7 @@ def analysis_map(
     preload: ArrayLike | None = None,
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
+    frame: str = "world",
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
@@ -203,10 +215,11 @@ def analysis_map(
     """The stability method's resistible force per direction on the settled scene's grasp
     (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...).
     ``nonbackdrivable`` and ``seat`` settle the scene as :func:`simulated_map` does, so that
-    both read the same grasp (the methods model every actuator as nonbackdrivable)."""
+    both read the same grasp (the methods model every actuator as nonbackdrivable);
+    ``frame`` as there."""
     from .contacts import grasp_from_mujoco
 
-    _check(plane, method, directions, workers, cap)
+    _check(plane, method, directions, workers, cap, frame)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
@@ -217,6 +230,8 @@ def analysis_map(
     grasp = grasp_from_mujoco(model, data)
     com = model.body_ipos[model.body("object").id].copy()
     angles, units = _directions(plane, directions)
+    if frame == "object":
+        units = units @ grasp.object_mat.T
     jobs = [(u, float(cap)) for u in units]
     args = (grasp, commands, com, method, options)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
@@ -320,6 +335,7 @@ def run(
     progress: bool = True,
     methods: Sequence[str] = ("sim",),
     seat: ArrayLike | None = None,
+    frame: str = "world",
     **options: Any,
 ) -> tuple[Path, Path, list[float], list[tuple[str, str, dict[str, float]]]]:
     """The CLI's work: one map per method and preload, CSV + PNG; returns their paths, the
@@ -332,12 +348,13 @@ def run(
             if method == "sim":
                 rm = simulated_map(
                     scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable,
-                    seat=seat, cap=cap, workers=workers, progress=progress,
+                    seat=seat, frame=frame, cap=cap, workers=workers, progress=progress,
                 )  # fmt: skip
             else:
                 rm = analysis_map(
                     scene, plane, directions, method=method, preload=pre,
-                    nonbackdrivable=nonbackdrivable, seat=seat, cap=cap, workers=workers,
+                    nonbackdrivable=nonbackdrivable, seat=seat, frame=frame, cap=cap,
+                    workers=workers,
                     progress=progress, **options,
                 )  # fmt: skip
             walls.append(time.perf_counter() - t)
@@ -347,9 +364,9 @@ def run(
             tag = ", ratcheted" if (method == "sim" and nonbackdrivable) else ""
             maps.append((f"{method}, {what}{tag}", rm))
             keys.append((method, what))
-    stem = f"{scene}_{plane}"
+    stem = f"{scene}_{plane}" + ("_object" if frame == "object" else "")
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
-    title = f"{scene}: resistible force in the {plane} plane [N] (cap {cap:g} N)"
+    title = f"{scene}: resistible force in the {frame} {plane} plane [N] (cap {cap:g} N)"
     png = plot_maps(out / f"{stem}.png", maps, title)
     sims = {what: rm for (method, what), (_, rm) in zip(keys, maps, strict=True) if method == "sim"}
     agree = []

@@ -17,6 +17,11 @@ it there for the scenes' settings (elliptic cone, impratio 100, timestep 1 ms, n
 while a slip that breaks the grasp runs away within a few ms of the limit. The answer is
 therefore the load at breakaway, late by at most ``rate`` x the time to move ``max_shift``
 after it (tested on the analytic pinch: within a few percent of ``2 mu tau / L``).
+
+A new contact also ends the run (``stop_on_new_contact``, default on): when the object
+touches a body it did not touch at rest (the palm, a finger that was open), the grasp the
+prediction was made for no longer exists, whatever the new contact can hold. The reason
+the run ended is :attr:`Resistance.reason`.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ class Resistance:
     turn: float  # rotation angle when the run stopped [rad]
     seconds: float  # simulated time of the ramp [s]
     trace: NDArray[np.float64] = field(repr=False)  # rows (s, shift, turn) every 10 ms
+    reason: str = ""  # "cap", "shift", "turn" or "new contact: <body>"
 
 
 def simulated_resistance(
@@ -58,6 +64,7 @@ def simulated_resistance(
     settle_s: float = 0.1,
     ratchet: Ratchet | None = None,
     body: str = "object",
+    stop_on_new_contact: bool = True,
 ) -> Resistance:
     """Ramp a load along ``direction`` on ``body`` until it moves (module doc).
 
@@ -72,6 +79,8 @@ def simulated_resistance(
     max_shift, max_turn : what counts as moved [m], [rad].
     settle_s : rest before the ramp [s] (the reference pose is taken after it).
     ratchet : a :class:`ihm.ratchet.Ratchet` updated every step (nonbackdrivable joints).
+    stop_on_new_contact : end the run when ``body`` touches a body it did not touch after
+        ``settle_s`` (module doc).
     """
     w = np.asarray(direction, dtype=float).reshape(-1)
     if w.shape != (6,) or not np.isfinite(w).all():
@@ -99,6 +108,7 @@ def simulated_resistance(
     advance(int(round(settle_s / dt)))
     p0 = data.xipos[bid].copy()
     q0 = data.xquat[bid].copy()
+    touching = _touching(model, data, bid)
     rot = np.zeros(3)
     steps = int(np.ceil(cap / rate / dt))
     every = max(1, int(round(0.01 / dt)))
@@ -115,9 +125,29 @@ def simulated_resistance(
         turn = float(np.linalg.norm(rot))
         if k % every == 0:
             trace.append((s, shift, turn))
-        if shift > max_shift or turn > max_turn or not np.isfinite(shift):
+        reason = ""
+        if shift > max_shift or not np.isfinite(shift):
+            reason = "shift"
+        elif turn > max_turn:
+            reason = "turn"
+        elif stop_on_new_contact:
+            new = _touching(model, data, bid) - touching
+            if new:
+                reason = "new contact: " + ", ".join(sorted(model.body(b).name for b in new))
+        if reason:
             data.xfrc_applied[bid] = 0.0
-            return Resistance(held, False, shift, turn, k * dt, np.array(trace).reshape(-1, 3))
+            tr = np.array(trace).reshape(-1, 3)
+            return Resistance(held, False, shift, turn, k * dt, tr, reason)
         held = s
     data.xfrc_applied[bid] = 0.0
-    return Resistance(held, True, shift, turn, k * dt, np.array(trace).reshape(-1, 3))
+    return Resistance(held, True, shift, turn, k * dt, np.array(trace).reshape(-1, 3), "cap")
+
+
+def _touching(model: mujoco.MjModel, data: mujoco.MjData, bid: int) -> set[int]:
+    """Bodies in contact with body ``bid`` (penetrating: ``dist < 0``)."""
+    out = set()
+    for c in data.contact[: data.ncon]:
+        b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
+        if c.dist < 0 and bid in (b1, b2):
+            out.add(int(b2 if b1 == bid else b1))
+    return out

@@ -232,3 +232,32 @@ def test_seat_needs_nonbackdrivable():
         ihm.load_scene("barrett_box_3d", seat=[0, 0.01, 0.01, 0.02])
     with pytest.raises(ihm.scenes.SceneError, match="seat"):
         ihm.load_scene("barrett_box_3d", nonbackdrivable=True, seat=[0, 0.01])
+
+
+def test_new_contact_ends_the_run():
+    """barrett_box pushed toward the palm (object +y) with no preload slides the 0.8 mm
+    down to the palm face: the run ends at that new contact, before 2 mm of travel."""
+    model, data = ihm.load_scene(
+        "barrett_box", preload=[0, 0, 0, 0], nonbackdrivable=True, seat=[0, 0.01, 0.01, 0]
+    )
+    b = model.body("object").id
+    u = data.xmat[b].reshape(3, 3) @ [0.0, 1.0, 0.0]  # object +y = palm -z
+    assert u[2] == pytest.approx(-1.0, abs=1e-3)
+    res = simulated_resistance(
+        model, data, np.r_[u, 0, 0, 0], cap=5, ratchet=ihm.scenes.last_ratchet
+    )
+    assert res.reason == "new contact: palm" and not res.capped
+    assert res.shift < 0.002 and 0 < res.value < 5
+
+
+def test_object_frame_maps_turn_with_the_object():
+    """frame='object' maps the object's axes: on barrett_box (object x = palm y) the
+    object-frame map at 0 deg is the world-frame yz map at 0 deg (force along palm +y)."""
+    from ihm.maps import analysis_map
+
+    kw = dict(method="gws", preload=[0, 0.1, 0.1, 0], cap=20, progress=False)
+    obj = analysis_map("barrett_box", "xy", 4, frame="object", **kw)
+    world = analysis_map("barrett_box", "yz", 4, **kw)
+    assert obj.magnitudes[0] == pytest.approx(world.magnitudes[0], rel=1e-3)  # object turned ~1e-4
+    # (the object rests turned by ~1e-4 rad); object +y is palm -z: world yz at 270 deg
+    assert obj.magnitudes[1] == pytest.approx(world.magnitudes[3], rel=1e-3)
