@@ -93,22 +93,24 @@ _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION  # positions, velocities, controls, 
 
 
 def _settled_state(
-    scene: str, preload: Any, nonbackdrivable: bool, seat: Any
+    scene: str, preload: Any, nonbackdrivable: bool, seat: Any, gravity: bool = True
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Settle the scene (errors surface here, in the calling process); its state, the
     ratchet's stops (None unless nonbackdrivable) and the object's orientation at rest."""
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                                    seat=seat)  # fmt: skip
+                                    seat=seat, gravity=gravity)  # fmt: skip
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
     stops = None if scenes.last_ratchet is None else scenes.last_ratchet.stops.copy()
     return state, stops, data.xmat[model.body("object").id].reshape(3, 3).copy()
 
 
-def _init(scene: str, state: np.ndarray, stops: np.ndarray | None) -> None:
+def _init(scene: str, state: np.ndarray, stops: np.ndarray | None, gravity: bool = True) -> None:
     """Worker set-up: the scene's model and the settled state (and ratchet stops) every
     direction starts from."""
     model = mujoco.MjModel.from_xml_path(str(scenes.scene_path(scene)))
+    if not gravity:
+        model.opt.gravity[:] = 0.0
     data = mujoco.MjData(model)
     _STATE.update(model=model, data=data, state=state, spec=_SPEC, stops=stops)
 
@@ -139,6 +141,7 @@ def simulated_map(
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
     frame: str = "world",
+    gravity: bool = True,
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
@@ -151,18 +154,19 @@ def simulated_map(
     (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
     ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``frame``: the plane's
     axes are the world's (``"world"``) or the object's at rest (``"object"``: the thesis'
-    axes, as each scene documents them); ``resistance_kwargs`` go to
+    axes, as each scene documents them); ``gravity=False``: no gravity anywhere (the mapped
+    force stands for the object's weight turned around); ``resistance_kwargs`` go to
     :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
     """
     _check(plane, "sim", directions, workers, cap, frame)
     scenes.scene_path(scene)  # unknown scene: SceneError before any worker starts
     angles, units = _directions(plane, directions)
     pre = None if preload is None else np.asarray(preload, dtype=float)
-    state, stops, rot = _settled_state(scene, pre, nonbackdrivable, seat)
+    state, stops, rot = _settled_state(scene, pre, nonbackdrivable, seat, gravity)
     if frame == "object":
         units = units @ rot.T
     dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
-    out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops), progress,
+    out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops, gravity), progress,
                     f"{scene} sim map")  # fmt: skip
     mags = np.array([v for v, _ in out])
     capped = np.array([c for _, c in out], dtype=bool)
@@ -207,6 +211,7 @@ def analysis_map(
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
     frame: str = "world",
+    gravity: bool = True,
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
@@ -216,14 +221,14 @@ def analysis_map(
     (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...).
     ``nonbackdrivable`` and ``seat`` settle the scene as :func:`simulated_map` does, so that
     both read the same grasp (the methods model every actuator as nonbackdrivable);
-    ``frame`` as there."""
+    ``frame`` and ``gravity`` as there (no gravity: no base load)."""
     from .contacts import grasp_from_mujoco
 
     _check(plane, method, directions, workers, cap, frame)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                                    seat=seat)  # fmt: skip
+                                    seat=seat, gravity=gravity)  # fmt: skip
     if scenes.last_ratchet is not None:
         scenes.last_ratchet.release()
     commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)

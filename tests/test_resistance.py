@@ -162,6 +162,9 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
         (["barrett_box", "--plane", "xq"], "plane"),
         (["barrett_box", "--method", "planar"], "unknown method"),
         (["barrett_box", "--preload", "1", "2"], "needs 4 actuator forces"),
+        (["barrett_box", "--frame", "hand"], "unknown frame"),
+        (["barrett_box", "--seat", "0", "0.01", "0.01", "0"], "--seat needs --nonbackdrivable"),
+        (["barrett_box", "--method", "gws", "--normal-uncertainty", "2"], "the refinement method"),
     ):
         q = subprocess.run(
             [sys.executable, "-m", "ihm", "map", *bad, "--no-progress"],
@@ -261,3 +264,14 @@ def test_object_frame_maps_turn_with_the_object():
     assert obj.magnitudes[0] == pytest.approx(world.magnitudes[0], rel=1e-3)  # object turned ~1e-4
     # (the object rests turned by ~1e-4 rad); object +y is palm -z: world yz at 270 deg
     assert obj.magnitudes[1] == pytest.approx(world.magnitudes[3], rel=1e-3)
+
+
+def test_experiments_cli_rejects_unknown_names() -> None:
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    q = subprocess.run([sys.executable, "-m", "ihm.experiments", "nope"], cwd=root,
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert q.returncode == 2 and "unknown experiment 'nope'" in q.stderr
+    assert "barrett_box_3d" in q.stderr
