@@ -41,8 +41,8 @@ R = R_FINGER + R_FINGER
 PROXIMAL_LENGTH = 0.060  # proximal link, joint to joint [m]
 DISTAL_LENGTH = 0.040  # distal link, distal joint to the centre of the tip [m]
 LINK_RADIUS = 0.008  # capsule radius of both links [m]
-JOINT_SPACING = 0.050  # distance between the two proximal joints [m]
-PALM_WIDTH = 0.080  # palm width, visual only [m]
+JOINT_SPACING = 0.110  # distance between the two proximal joints [m] (XML header: why)
+PALM_WIDTH = 0.140  # palm width, visual only [m]
 
 # Contact skin [MuJoCo solref (timeconst [s], damping ratio), solimp]: the hand's collision
 # class and every scene object carry the same values, so each contact simulates exactly these
