@@ -256,27 +256,34 @@ def test_optimal_commands_limits() -> None:
             solve(g, OptimalCommands(w, **bad), method="refinement")
 
 
+MU_CUBE = 0.45
+
+
 def test_cube_sweep_on_the_mujoco_scene() -> None:
-    """The same sweep on the grasp read from MuJoCo's barrett_cube (settled with the thumb
-    at 0.02 N m; gravity not applied): the force along +z falls with the thumb's command
-    (0.63, 0.59, 0.32, 0.06 N at 0, 0.03, 0.06, 0.09 N m, against the analysis'
-    (0.09 - f3) / arm = 0.78, 0.52, 0.26, 0 with the scene's 0.115 m arm) and the cube is
-    unstable at 0.1 N m. The torque about x stays at 1.8e-3 N m from 0.03 to 0.1 N m instead
-    of growing: the scene's contact 3 lies 4.8 mm from the line of contacts 1 and 2 (the
-    scene defect the MuJoCo-experiments issue names)."""
+    """The same sweep on the grasp read from MuJoCo's barrett_cube (inner-link contacts at
+    equal 0.05 m arms, no gravity): the force along +z is (2 mu tau12 - f3) / 0.05 =
+    (0.09 - f3) / 0.05 within 0.03 N (the normals tilt ~1-2 deg toward the palm), nothing
+    beyond 0.09 N m; a torque about -x is not resisted with the thumb unloaded (contacts 1
+    and 2 lie on the x-axis, thesis) and is resisted by the thumb's friction once it
+    pushes."""
     import ihm
     from ihm.contacts import grasp_from_mujoco
 
     model, data = ihm.load_scene("barrett_cube", preload=[0.0, 0.1, 0.1, 0.02])
     g = grasp_from_mujoco(model, data)
-    vals = []
-    for f3 in (0.0, 0.03, 0.06, 0.09):
+    for f3 in (0.0, 0.03, 0.06):
         sol = _max(g, Z, commands=[0.0, 0.1, 0.1, f3])
-        assert sol.stable
-        vals.append(sol.value)
-    assert all(b < a for a, b in zip(vals, vals[1:], strict=False)), vals
-    assert vals[-1] < 0.15 * vals[0]
+        assert sol.stable and sol.value == pytest.approx((0.09 - f3) / 0.05, abs=0.03)
     assert _max(g, Z, commands=[0.0, 0.1, 0.1, 0.1]).stable is False
+    # about -x the thumb's friction alone resists: a mu f3 / 0.05 with a = |z of contact 3|
+    # (0.0394 m); about +x its normal, tilted 1.7 deg toward the palm, is pushed into the
+    # nonbackdrivable thumb: resisted passively, whatever the thumb's command
+    a = abs(g.points[np.argmin(g.points[:, 2]), 2])
+    for f3 in (0.0, 0.03):
+        sol = _max(g, [0, 0, 0, -1.0, 0, 0], commands=[0.0, 0.1, 0.1, f3], time_limit=60)
+        assert sol.stable and sol.value == pytest.approx(a * MU_CUBE * f3 / 0.05, abs=2e-3)
+    plus = _max(g, [0, 0, 0, 1.0, 0, 0], commands=[0.0, 0.1, 0.1, 0.0], time_limit=60)
+    assert plus.stable and plus.value > 0.02
 
 
 def test_optimal_commands_flask_pattern() -> None:
