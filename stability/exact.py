@@ -48,8 +48,8 @@ from .errors import GraspError
 from .grasp import Grasp
 from .mip import INF, MipModel
 
-__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "hand_data",
-           "length_scale", "scale_bounds"]  # fmt: skip
+__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "clean_wrench",
+           "hand_data", "length_scale", "scale_bounds"]  # fmt: skip
 
 
 def length_scale(grasp: Grasp) -> float:
@@ -166,6 +166,26 @@ def _clean(A: NDArray[np.float64]) -> NDArray[np.float64]:
     ``barrett_box``). A 1e-7 relative entry moves no answer beyond the solvers' tolerances."""
     big = float(np.abs(A).max(initial=0.0))
     return np.where(np.abs(A) > CLEAN_RTOL * big, A, 0.0)
+
+
+def clean_wrench(
+    w: NDArray[np.float64], scale: float, length: float, planar: bool
+) -> NDArray[np.float64]:
+    """``w`` with components below ``CLEAN_RTOL scale`` set to 0 (torques compared over the
+    grasp's size ``length``, as forces): the round-off of a wrench rotated into the object
+    frame (a box's weight read from a simulator carries 4e-10 N out of its plane), the
+    right-hand side's counterpart of :func:`_clean`. It matters where the grasp cannot
+    resist a load of one sign at all: a planar Barrett grasp takes an out-of-plane load
+    only through friction whose torque the nonbackdrivable spread joint must hold, which it
+    can for one sign only, so the exact problem flips from stable to unstable at zero load.
+    The solvers accept that 4e-10 N residual as zero (feasibility tolerance 1e-6), but
+    SCIP's infeasibility proofs use it exactly (a Farkas proof of a refinement round
+    multiplied it by 1.8e4 into a bound of 7.7e-6 N on a friction force, cutting off the
+    optimum; ``spatial`` proved the grasp unstable); zeroed, every method agrees."""
+    k = 2 if planar else 3
+    mag = np.abs(np.asarray(w, dtype=float))
+    mag = np.r_[mag[:k], mag[k:] / length]
+    return np.where(mag > CLEAN_RTOL * scale, w, 0.0)
 
 
 @dataclass
@@ -317,8 +337,12 @@ class ExactProblem:
         cap: float = 0.0,
     ) -> int | None:  # fmt: skip
         """``G c + wrench + s direction = 0`` (eq. object_eq); with ``direction`` a new
-        variable ``s in [0, cap]`` (its index is returned), else None."""
+        variable ``s in [0, cap]`` (its index is returned), else None. Round-off in
+        ``wrench`` and ``direction`` is zeroed first (:func:`clean_wrench`)."""
         M, G = self.model, self.G
+        wrench = self._clean_wrench(wrench)
+        if direction is not None:
+            direction = self._clean_wrench(direction, own=True)
         s = None if direction is None else M.add_var(0.0, cap, "C", "s")
         for row in range(G.shape[0]):
             idx, val = self._extend([], [], self.c.reshape(-1), G[row])
@@ -327,11 +351,24 @@ class ExactProblem:
             M.add_constraint(idx, val, "==", -float(wrench[row]), f"object{row}")
         return s
 
+    def _clean_wrench(self, w: NDArray[np.float64], own: bool = False) -> NDArray[np.float64]:
+        """:func:`clean_wrench` at the problem's force scale (``own``: at ``w``'s own, for a
+        direction, whose length is arbitrary)."""
+        g = self.grasp
+        L = length_scale(g)
+        w = np.asarray(w, dtype=float)
+        scale = self.bounds.scale
+        if own:
+            k = 2 if g.planar else 3
+            scale = max(float(np.abs(w[:k]).max()), float(np.abs(w[k:]).max()) / L)
+        return clean_wrench(w, scale, L, g.planar)
+
     def add_net_wrench(self, wrench: NDArray[np.float64], weights: NDArray[np.float64]) -> None:
         """Object equilibrium dropped (thesis sec. iterative): the net wrench
         ``G c + wrench = e+ - e-`` is free and the objective is ``sum weights (e+ + e-)``, its
         weighted 1-norm."""
         M, G = self.model, self.G
+        wrench = self._clean_wrench(wrench)
         ep = M.add_vars(G.shape[0], 0.0, INF, "C", "e+")
         em = M.add_vars(G.shape[0], 0.0, INF, "C", "e-")
         for row in range(G.shape[0]):

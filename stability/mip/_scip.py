@@ -53,7 +53,10 @@ def build_scip(
         # (python -m stability.bench grasps): 18.4 s -> 7.2 s for six queries, the same
         # answers (SCIP's EASYCIP emphasis: 14.8 s); 4-contact checks 4.7 -> 1.2 s and
         # 11.1 -> 3.1 s. Not for iterative, whose scheme follows the MIPs' particular
-        # optimal vertices and stopped converging on the wedge with it.
+        # optimal vertices and stopped converging on the wedge with it. (A wrong optimum once
+        # seen with it on the Barrett box came from 4e-10 N of round-off in the load, which
+        # SCIP's conflict analysis used exactly; its search order only reached that node
+        # first: stability.exact.clean_wrench, tests/test_solver_regressions.py.)
         import pyscipopt as scip
 
         m.setSeparating(scip.SCIP_PARAMSETTING.OFF)
