@@ -74,15 +74,24 @@ def _panels(path: Path, panels: list[tuple[str, list[tuple[str, ResistibleMap]]]
 
     fig, axes = plt.subplots(1, len(panels), subplot_kw={"projection": "polar"},
                              figsize=(4.6 * len(panels), 5.2))  # fmt: skip
+    from matplotlib.lines import Line2D
+
     axes = np.atleast_1d(axes)
     for ax, (name, maps) in zip(axes, panels, strict=True):
+        handles = []
         for k, (label, rm) in enumerate(maps):
             plot_resistible(ax, rm, name, color=f"C{k}")
-            ax.plot([], [], color=f"C{k}", label=label)
-        ax.legend(loc="lower center", fontsize=7, bbox_to_anchor=(0.5, -0.28))
+            n_nan = int(np.isnan(rm.magnitudes).sum())
+            extra = f" ({n_nan} unanswered)" if n_nan else ""
+            if not np.any(rm.magnitudes > 0):
+                extra += " (0 everywhere)"
+            handles.append(Line2D([], [], color=f"C{k}", label=label + extra))
+        handles.append(Line2D([], [], color="k", lw=3, label=">= cap"))
+        ax.legend(handles=handles, loc="upper center", fontsize=7, ncol=2,
+                  bbox_to_anchor=(0.5, -0.08))  # fmt: skip
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
     return path
 
