@@ -275,3 +275,19 @@ def test_experiments_cli_rejects_unknown_names() -> None:
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert q.returncode == 2 and "unknown experiment 'nope'" in q.stderr
     assert "barrett_box_3d" in q.stderr
+
+
+@pytest.mark.slow
+def test_experiments_quick_run(tmp_path) -> None:
+    """``python -m ihm.experiments barrett_cube --quick`` writes its CSV, PNG and summary,
+    and the +z force prediction is the thesis' analytic line (0.09 - tau3) / 0.05."""
+    import json
+
+    from ihm.experiments import run_experiment
+
+    summary = run_experiment("barrett_cube", tmp_path, quick=True)
+    for ext in (".csv", ".png", "_summary.json"):
+        assert (tmp_path / f"barrett_cube{ext}").stat().st_size > 100
+    z = summary["force +z [N]"]
+    np.testing.assert_allclose(z["refinement"], z["analytic"], atol=0.02)
+    assert json.loads((tmp_path / "barrett_cube_summary.json").read_text())["tau3"][0] == 0.0
