@@ -120,7 +120,7 @@ def _summarise_maps(maps, walls) -> dict[str, Any]:
 def box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     """Grasp example 1 (thesis figs. 2dgrasp_xy, 2dgrasp_xz): resistible forces in the object
     xy-plane (the grasp plane) and xz-plane, no preload vs 0.1 N m on fingers 1 and 2."""
-    n = 8 if quick else 36
+    n = 8 if quick else 24
     seat = [0.0, 0.01, 0.01, 0.0]
     preloads = {"no preload": [0.0, 0.0, 0.0, 0.0], "preload 0.1 N m": [0.0, 0.1, 0.1, 0.0]}
     summary: dict[str, Any] = {"directions": n, "seat": seat, "cap_N": 10.0}
