@@ -36,7 +36,6 @@ from stability import GraspError
 from stability.maps import ResistibleMap, plane_axes, plot_resistible
 
 from . import scenes
-from .ratchet import Ratchet, actuated_joints, actuated_tendons
 from .resistance import simulated_resistance
 
 __all__ = [
@@ -44,6 +43,7 @@ __all__ = [
     "MapError",
     "agreement",
     "analysis_map",
+    "map_value",
     "plot_maps",
     "simulated_map",
     "write_map_csv",
@@ -122,7 +122,7 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
     mujoco.mj_forward(m, d)
     ratchet = None
     if _STATE["stops"] is not None:
-        ratchet = Ratchet(m, d, actuated_joints(m), tendons=actuated_tendons(m))
+        ratchet = scenes.transmission_ratchet(m, d)
         ratchet.stops = _STATE["stops"]
     try:
         res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **kw)
@@ -195,6 +195,12 @@ def _one_analysis(args: tuple[np.ndarray, float]) -> tuple[float, bool]:
     else:
         q = MaxDisturbance(d, commands=_STATE["commands"], cap=cap, base=g.gravity_wrench)
         sol = solve(g, q, method=_STATE["method"], **_STATE["options"])
+    return map_value(sol)
+
+
+def map_value(sol: Any) -> tuple[float, bool]:
+    """A MaxDisturbance solution as a map entry ``(value, capped)``: NaN when the solver
+    gave no answer (time-out, error), 0 when unstable, else the value [N or N m]."""
     if sol.status not in ("solved", "optimal") and sol.value is None:
         return float("nan"), False
     value = sol.value if sol.stable and sol.value is not None else 0.0

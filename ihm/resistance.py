@@ -36,7 +36,7 @@ from stability import GraspError
 
 from .ratchet import Ratchet
 
-__all__ = ["Resistance", "simulated_resistance"]
+__all__ = ["Resistance", "simulated_resistance", "touching_bodies"]
 
 
 @dataclass
@@ -108,7 +108,7 @@ def simulated_resistance(
     advance(int(round(settle_s / dt)))
     p0 = data.xipos[bid].copy()
     q0 = data.xquat[bid].copy()
-    touching = _touching(model, data, bid)
+    touching = touching_bodies(model, data, bid)
     rot = np.zeros(3)
     steps = int(np.ceil(cap / rate / dt))
     every = max(1, int(round(0.01 / dt)))
@@ -131,7 +131,7 @@ def simulated_resistance(
         elif turn > max_turn:
             reason = "turn"
         elif stop_on_new_contact:
-            new = _touching(model, data, bid) - touching
+            new = touching_bodies(model, data, bid) - touching
             if new:
                 reason = "new contact: " + ", ".join(sorted(model.body(b).name for b in new))
         if reason:
@@ -143,7 +143,7 @@ def simulated_resistance(
     return Resistance(held, True, shift, turn, k * dt, np.array(trace).reshape(-1, 3), "cap")
 
 
-def _touching(model: mujoco.MjModel, data: mujoco.MjData, bid: int) -> set[int]:
+def touching_bodies(model: mujoco.MjModel, data: mujoco.MjData, bid: int) -> set[int]:
     """Bodies in contact with body ``bid`` (penetrating: ``dist < 0``)."""
     out = set()
     for c in data.contact[: data.ncon]:

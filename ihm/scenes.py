@@ -39,6 +39,7 @@ __all__ = [
     "scene_about",
     "scene_path",
     "settle",
+    "transmission_ratchet",
 ]
 
 SCENES_DIR = Path(__file__).resolve().parent.parent / "assets" / "scenes"
@@ -368,18 +369,18 @@ def load_scene(
             settle(model, data, seat_c, **{"grip_s": 0.0, "rounds": 1, **settle_kwargs})
         finally:
             model.opt.gravity[:] = gravity
-        last_ratchet = _ratchet(model, data)
+        last_ratchet = transmission_ratchet(model, data)
         # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
         # spread servo and thumb, the elliptic friction cones against the stiff stops) while
         # positions stay within micrometres: rest means |qvel| < 1e-3 here
         kw = {"grip_s": 0.0, "rounds": 1, "vtol": 1e-3, **settle_kwargs}
         last_settle = settle(model, data, f_c, ratchet=last_ratchet, **kw)
     if nonbackdrivable and last_ratchet is None:
-        last_ratchet = _ratchet(model, data)
+        last_ratchet = transmission_ratchet(model, data)
     return model, data
 
 
-def _ratchet(model: mujoco.MjModel, data: mujoco.MjData) -> Ratchet:
+def transmission_ratchet(model: mujoco.MjModel, data: mujoco.MjData) -> Ratchet:
     """The scene's nonbackdrivable transmission: motor joints and actuated tendons."""
     return Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
 

@@ -23,8 +23,8 @@ from stability.maps import ResistibleMap, plot_resistible
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
-from ..maps import agreement, analysis_map, simulated_map, write_map_csv
-from ..resistance import simulated_resistance
+from ..maps import agreement, analysis_map, map_value, simulated_map, write_map_csv
+from ..resistance import simulated_resistance, touching_bodies
 
 __all__ = ["box", "box_3d", "cube", "flask"]
 
@@ -144,8 +144,7 @@ def _rest_ok(model: mujoco.MjModel, data: mujoco.MjData, before: np.ndarray,
              touching: set[int]) -> bool:  # fmt: skip
     """The loaded grasp is the seated one: the object moved < 2 mm and touches nothing new."""
     b = model.body("object").id
-    now = {int(model.geom_bodyid[g]) for c in data.contact[: data.ncon]
-           for g in (c.geom1, c.geom2) if c.dist < 0} - {b}  # fmt: skip
+    now = touching_bodies(model, data, b)
     return bool(np.linalg.norm(data.xipos[b] - before) < 0.002 and now <= touching)
 
 
@@ -156,19 +155,18 @@ def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool =
                                seat=seat, gravity=gravity)  # fmt: skip
     b = m0.body("object").id
     before = d0.xipos[b].copy()
-    touching = {int(m0.geom_bodyid[g]) for c in d0.contact[: d0.ncon]
-                for g in (c.geom1, c.geom2) if c.dist < 0} - {b}  # fmt: skip
+    touching = touching_bodies(m0, d0, b)
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=True, seat=seat,
                                     gravity=gravity)  # fmt: skip
     return model, data, scenes.last_ratchet, _rest_ok(model, data, before, touching)
 
 
-def _predict(model, data, direction_obj: np.ndarray, commands, cap: float, method: str,
+def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: str,
              at_com: bool = True, **opts: Any) -> tuple[float, bool, str, float]:  # fmt: skip
-    """MaxDisturbance on the settled grasp for an object-frame direction (force, torque):
-    the force through the centre of mass (``at_com``, the thesis' load cell) or through the
-    object origin; (value, capped, status, seconds)."""
-    g = grasp_from_mujoco(model, data)
+    """MaxDisturbance on the settled grasp ``g`` (:func:`grasp_from_mujoco`) for an
+    object-frame direction (force, torque): the force through the centre of mass
+    (``at_com``, the thesis' load cell) or through the object origin; (value, capped,
+    status, seconds)."""
     com = model.body_ipos[model.body("object").id] if at_com else np.zeros(3)
     f, tq = direction_obj[:3], direction_obj[3:]
     d = np.r_[f, np.cross(com, f) + tq]
@@ -176,10 +174,8 @@ def _predict(model, data, direction_obj: np.ndarray, commands, cap: float, metho
     sol = solve(g, MaxDisturbance(d, commands=commands, cap=cap, base=g.gravity_wrench),
                 method=method, **opts)  # fmt: skip
     wall = time.perf_counter() - t
-    if sol.value is None and sol.status not in ("solved", "optimal"):
-        return float("nan"), False, sol.status, wall
-    value = float(sol.value) if sol.stable and sol.value is not None else 0.0
-    return value, bool(sol.stats.get("capped", False)), sol.status, wall
+    value, capped = map_value(sol)
+    return value, capped, sol.status, wall
 
 
 def _simulate(model, data, ratchet, direction_obj: np.ndarray, cap: float, at_com: bool = True):
@@ -211,7 +207,7 @@ def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
                "seated_grasp_kept": ok}  # fmt: skip
         for method, opts in (("refinement", {"time_limit": TIME_LIMIT}),
                              ("iterative", {"time_limit": TIME_LIMIT})):  # fmt: skip
-            v, c, status, wall = _predict(model, data, ex, pre, 50.0, method, **opts)
+            v, c, status, wall = _predict(model, g, ex, pre, 50.0, method, **opts)
             res[method] = {"value": v, "capped": c, "status": status, "wall_s": round(wall, 2)}
             rows.append((case, method, v, c))
         sim = _simulate(model, data, ratchet, ex, 50.0)
@@ -261,8 +257,9 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         stops = ratchet.stops.copy()
         for name, (d, cap) in loads.items():
-            v, c, status, wall = _predict(model, data, d, pre, cap, "refinement",
-                                          at_com=False, time_limit=TIME_LIMIT)  # fmt: skip
+            g = grasp_from_mujoco(model, data)
+            v, c, status, wall = _predict(model, g, d, pre, cap, "refinement", at_com=False,
+                                          time_limit=TIME_LIMIT)  # fmt: skip
             rows.append((tau3, name, "refinement", v, c, status, wall))
             mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
             ratchet.stops = stops
@@ -349,8 +346,8 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     # optimal commands for the largest -y force under the naive preload
     down = np.array([0, -1.0, 0, 0, 0, 0])
     model, data, ratchet, _ = _seated("barrett_flask", naive, seat, gravity=False)
-    W, _, status, _ = _predict(model, data, down, naive, 10.0, "refinement", **FLASK_REF)
     g = grasp_from_mujoco(model, data)
+    W, _, status, _ = _predict(model, g, down, naive, 10.0, "refinement", **FLASK_REF)
     com = model.body_ipos[model.body("object").id]
     wrench = W * np.r_[down[:3], np.cross(com, down[:3])]
     sol = solve(g, OptimalCommands(wrench, upper=[0.0, 3.0, 3.0, 3.0]), method="refinement",
