@@ -256,8 +256,8 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
         mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         stops = ratchet.stops.copy()
+        g = grasp_from_mujoco(model, data)  # the settled grasp, before any ramp moves it
         for name, (d, cap) in loads.items():
-            g = grasp_from_mujoco(model, data)
             v, c, status, wall = _predict(model, g, d, pre, cap, "refinement", at_com=False,
                                           time_limit=TIME_LIMIT)  # fmt: skip
             rows.append((tau3, name, "refinement", v, c, status, wall))
