@@ -19,6 +19,8 @@ the model is below ``vtol`` for ``hold_s`` seconds of simulated time.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,6 +146,25 @@ def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
     return kp
 
 
+@contextmanager
+def _gravity_off(model: mujoco.MjModel) -> Iterator[None]:
+    """Gravity switched off inside the block, restored after it (also on errors)."""
+    gravity = model.opt.gravity.copy()
+    model.opt.gravity[:] = 0.0
+    try:
+        yield
+    finally:
+        model.opt.gravity[:] = gravity
+
+
+def _step(model: mujoco.MjModel, data: mujoco.MjData, ratchet: Ratchet | None) -> None:
+    """One physics step; with a ratchet, its stops follow (:meth:`Ratchet.step`)."""
+    if ratchet is None:
+        mujoco.mj_step(model, data)
+    else:
+        ratchet.step()
+
+
 def _run_until_rest(
     model: mujoco.MjModel,
     data: mujoco.MjData,
@@ -161,10 +182,7 @@ def _run_until_rest(
     calm = 0
     vmax = np.inf
     for k in range(max_steps):
-        if ratchet is None:
-            mujoco.mj_step(model, data)
-        else:
-            ratchet.step()
+        _step(model, data, ratchet)
         vmax = float(np.abs(data.qvel).max()) if model.nv else 0.0
         if not np.isfinite(vmax):
             raise SceneError(f"simulation diverged (qvel not finite) at t = {data.time:.3f} s")
@@ -239,19 +257,12 @@ def settle(
     mujoco.mj_forward(model, data)
     set_ctrl()
     steps = 0
-    gravity = model.opt.gravity.copy()
-    try:
-        model.opt.gravity[:] = 0.0
+    with _gravity_off(model):
         n_grip = int(round(grip_s / model.opt.timestep))
         for _ in range(n_grip):
             set_ctrl()  # servos act as pure force sources while the fingers close
-            if ratchet is None:
-                mujoco.mj_step(model, data)
-            else:
-                ratchet.step()
+            _step(model, data, ratchet)
         steps += n_grip
-    finally:
-        model.opt.gravity[:] = gravity
     done_rounds = 0
     vmax = np.inf
     for done_rounds in range(1, rounds + 1):  # noqa: B007
@@ -363,12 +374,8 @@ def load_scene(
     elif seat_c is None:
         last_settle = settle(model, data, f_c, **settle_kwargs)
     else:
-        gravity = model.opt.gravity.copy()
-        try:  # the object placed in the hand, the fingers closed lightly onto it
-            model.opt.gravity[:] = 0.0
+        with _gravity_off(model):  # the object placed in the hand, the fingers closed lightly
             settle(model, data, seat_c, **{"grip_s": 0.0, "rounds": 1, **settle_kwargs})
-        finally:
-            model.opt.gravity[:] = gravity
         last_ratchet = transmission_ratchet(model, data)
         # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
         # spread servo and thumb, the elliptic friction cones against the stiff stops) while
