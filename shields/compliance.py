@@ -1,0 +1,318 @@
+"""Linearised grasp compliance (thesis sec. "Grasp model", after Cutkosky and Bicchi).
+
+At a MuJoCo state, :func:`linearize` builds the grasp's compliance and the two maps that
+predict one step ahead how the object and the contact forces respond to a change of the
+servo setpoints ``dq`` (thesis eq. "linearization")::
+
+    [c; u]_{t+1} ~ [c; u]_t + [E; F] dq
+
+Conventions (DESIGN.md, with the axes stated here)
+-------------------------------------------------
+* Contact ``i`` has the frame ``[n, t1, t2]`` (rows, world coordinates), ``n`` pointing INTO
+  the object; ``c_i = (c_n, c_t1, c_t2)`` is the force of the hand on the object in it [N].
+* ``G`` (6 x 3m) gives the wrench on the object about the object body's origin, in WORLD
+  axes: ``w = G c`` with ``w = (f, torque)`` [N, N m]. (``ihm.grasp_from_mujoco`` expresses
+  the same ``G`` in object axes; the shield's box and tilt limits are in world axes.)
+* ``J`` (3m x l) maps the ``l`` servo setpoints [rad] to the motion of the hand's contact
+  point in the contact frames [m]; for the position servos of the four-finger hand a
+  setpoint is the joint angle the servo pulls toward, so ``J`` is the hand Jacobian.
+* The relative motion at the contacts is ``d = G^T du - J dq`` (``d_n > 0`` separates);
+  ``u = (p, theta)``: the object origin's position [m] and a small rotation vector [rad],
+  world axes.
+
+Compliance
+----------
+``C = C_contact + J C_joint J^T`` (3m x 3m), ``K = C^{-1}`` [N/m] (thesis eqs. "motion" to
+"K_matrix"), with
+
+* ``C_joint = diag(1 / kp)`` [rad/(N m)]: the servo's proportional gain (the four-finger
+  hand's series-elastic coupling, ``force = kp (ctrl - q)``); joint springs
+  (``jnt_stiffness``) must be 0.
+* ``C_contact``: what MuJoCo's soft contact does, read off the solver's own data. MuJoCo
+  solves each contact row for the force ``f = -(a - a_ref) / R`` with ``a_ref = -B v -
+  K_s I r`` (``efc_KBIP`` = ``K_s, B, I``; ``efc_R`` = ``R``; ``r`` the penetration, ``v`` the
+  row's velocity). At rest (``a = 0, v = 0``) the normal row is a linear spring:
+  ``c_n = (K_s I / R_n) (-r)``, compliance ``R_n / (K_s I)`` [m/N]. With the skin's
+  ``solref = (0.01 s, 1)`` and constant impedance ``I = 0.9`` this is ``K_s =
+  1 / (0.9^2 0.01^2) = 12,346 s^-2`` and ``R_n = (1 - I) / I * A`` (``A`` MuJoCo's diagonal
+  approximation of the contact's inverse inertia): 2,313 N/m for a fingertip on the
+  70 mm sphere. The tangential rows have no position term (``a_ref = -B v``): under a
+  constant tangential force MuJoCo's contact creeps at ``v = R_t c_t / B`` instead of
+  springing back. Over the prediction horizon ``h`` (the policy period) that is the
+  compliance ``R_t h / B`` [m/N] (about 1.1e-5 m/N at ``h`` = 0.05 s, impratio 100).
+
+Object motion and contact forces (Bicchi)
+-----------------------------------------
+With the external wrench constant, equilibrium ``G dc = 0`` and ``dc = K (J dq - G^T du)``
+give ::
+
+    F = (G K G^T)^+ G K J                    du = F dq      (thesis eq. F_matrix)
+    E = K (J - G^T F)                        dc = E dq      (thesis eq. E_matrix)
+
+The thesis prints ``(G K G)^{-1}`` (read ``G K G^T``) and ``E = (I - G^T (G K G^T)^{-1} G) K
+J``; the form above is the one that satisfies ``G E = 0`` (``E = (I - K G^T (G K G^T)^{-1}
+G) K J``). ``^+`` is the pseudo-inverse: an object direction that no contact stiffness
+holds (two point contacts: the spin about the line through them) gets no motion.
+
+What the linearisation leaves out (its accuracy is measured in tests/test_compliance.py and
+``python -m shields.accuracy``): contacts that roll or slide, contacts that make or break,
+the change of the contact frames with the motion (Cutkosky's geometric stiffness), the
+servo's force limit (a saturated servo does not follow its setpoint), the torsional friction
+of ``condim`` 4 contacts (it adds stiffness about the normal), the dynamics within the step,
+and contacts between fingers. Palm and floor contacts are fixed bodies (zero ``J`` rows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["GraspLinearization", "ShieldError", "linearize"]
+
+
+class ShieldError(ValueError):
+    """Bad input to the grasp shield or its model (unsupported model, bad option, no object)."""
+
+
+@dataclass
+class GraspLinearization:
+    """The linearised grasp at one MuJoCo state (module docstring for conventions).
+
+    Attributes (``m`` contacts, ``l`` servos)
+    ----------------------------------------
+    contact_ids : (m,) MuJoCo contact index of each contact
+    bodies : (m,) MuJoCo body id of the hand side (a static body: the palm or floor)
+    links : (m,) names of those bodies
+    points : (m, 3) contact points, world [m]
+    frames : (m, 3, 3) rows ``n, t1, t2``, world, ``n`` into the object
+    forces : (m, 3) ``c = (c_n, c_t1, c_t2)`` MuJoCo computed [N]
+    mu : (m,) sliding friction coefficients
+    G : (6, 3m) grasp map, world axes, about ``object_pos``
+    J : (3m, l) setpoints [rad] -> hand contact-point motion in contact frames [m]
+    C_contact : (3m,) diagonal contact compliance [m/N] (normal, t1, t2 per contact)
+    C_joint : (l,) servo compliance ``1 / kp`` [rad/(N m)]
+    K : (3m, 3m) grasp stiffness ``(C_contact + J C_joint J^T)^{-1}`` [N/m]
+    F : (6, l) object motion per setpoint change, ``du = F dq`` [m/rad, rad/rad]
+    E : (3m, l) contact-force change per setpoint change, ``dc = E dq`` [N/rad]
+    object_pos : (3,) object body origin, world [m]
+    object_mat : (3, 3) object body orientation (columns: its axes in world)
+    horizon : prediction horizon of the tangential creep compliance [s]
+    """
+
+    contact_ids: NDArray[np.int64]
+    bodies: NDArray[np.int64]
+    links: list[str]
+    points: NDArray[np.float64]
+    frames: NDArray[np.float64]
+    forces: NDArray[np.float64]
+    mu: NDArray[np.float64]
+    G: NDArray[np.float64]
+    J: NDArray[np.float64]
+    C_contact: NDArray[np.float64]
+    C_joint: NDArray[np.float64]
+    K: NDArray[np.float64]
+    F: NDArray[np.float64]
+    E: NDArray[np.float64]
+    object_pos: NDArray[np.float64]
+    object_mat: NDArray[np.float64]
+    horizon: float
+
+    @property
+    def m(self) -> int:
+        """Number of contacts."""
+        return len(self.contact_ids)
+
+    def predict(self, dq: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(c + E dq, F dq)``: predicted contact forces (m, 3) [N] and object motion ``du``
+        (6,) [m, rad] for the setpoint change ``dq`` (l,) [rad]."""
+        dq = np.asarray(dq, dtype=np.float64)
+        return self.forces + (self.E @ dq).reshape(-1, 3), self.F @ dq
+
+
+class _HandInfo:
+    """Per-model data of :func:`linearize`, computed once per model."""
+
+    def __init__(self, model: mujoco.MjModel, object_body: str) -> None:
+        obj = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_body)
+        if obj < 0:
+            raise ShieldError(f"no body named {object_body!r} in the model")
+        if model.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC:
+            raise ShieldError("the compliance model reads elliptic-cone contact rows; set cone")
+        self.obj = obj
+        in_obj = np.zeros(model.nbody, dtype=bool)
+        in_obj[obj] = True
+        for b in range(obj + 1, model.nbody):
+            in_obj[b] = in_obj[model.body_parentid[b]]
+        self.in_obj = in_obj.tolist()
+        dofs, kp = [], []
+        for a in range(model.nu):
+            if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
+                raise ShieldError(f"actuator {model.actuator(a).name}: only joint servos")
+            j = int(model.actuator_trnid[a, 0])
+            gain, bias = model.actuator_gainprm[a], model.actuator_biasprm[a]
+            if (
+                model.actuator_gear[a, 0] != 1.0
+                or gain[0] <= 0
+                or not np.isclose(bias[1], -gain[0])
+                or int(model.jnt_type[j]) != int(mujoco.mjtJoint.mjJNT_HINGE)
+            ):
+                raise ShieldError(
+                    f"actuator {model.actuator(a).name}: only position servos (gear 1, "
+                    "force = kp (ctrl - q)) on hinges"
+                )
+            if model.jnt_stiffness[j] != 0.0:
+                raise ShieldError(f"joint {model.joint(j).name} has a spring; not modelled")
+            dofs.append(int(model.jnt_dofadr[j]))
+            kp.append(float(gain[0]))
+        self.dofs = np.array(dofs, dtype=np.int64)
+        self.C_joint = 1.0 / np.array(kp)
+        self.names = [model.body(b).name for b in range(model.nbody)]
+
+
+_INFO: dict[tuple[int, str], _HandInfo] = {}
+
+
+def _info(model: mujoco.MjModel, object_body: str) -> _HandInfo:
+    key = (id(model), object_body)
+    info = _INFO.get(key)
+    if info is None:
+        if len(_INFO) > 64:
+            _INFO.clear()
+        info = _INFO[key] = _HandInfo(model, object_body)
+    return info
+
+
+def contact_compliance(
+    data: mujoco.MjData, efc_address: int, horizon: float
+) -> tuple[float, float]:
+    """``(normal, tangential)`` compliance [m/N] of the contact whose first constraint row is
+    ``efc_address``: ``R_n / (K_s I)`` and ``R_t horizon / B`` (module docstring)."""
+    k_s, _, imp, _ = data.efc_KBIP[efc_address]
+    b = data.efc_KBIP[efc_address + 1, 1]
+    return float(data.efc_R[efc_address] / (k_s * imp)), float(
+        data.efc_R[efc_address + 1] * horizon / b
+    )
+
+
+def linearize(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    object_body: str = "object",
+    *,
+    horizon: float = 0.05,
+) -> GraspLinearization:
+    """The linearised grasp (``G, J, K, F, E``) at the current state of ``data``.
+
+    Every active contact between the object (``object_body``'s subtree) and another body
+    counts; contacts with a static body get zero ``J`` rows. Call after ``mj_forward`` or
+    ``mj_step`` (contacts and constraint rows of the current state). ``horizon`` [s] sets
+    the tangential creep compliance (the policy period).
+
+    Returns a :class:`GraspLinearization` with ``m = 0`` (empty maps) when the object
+    touches nothing.
+
+    Raises
+    ------
+    ShieldError
+        No such body; a pyramidal friction cone; actuators other than position servos on
+        hinges; a frictionless contact; ``horizon <= 0``.
+    """
+    if not horizon > 0 or not np.isfinite(horizon):
+        raise ShieldError(f"horizon must be a finite number > 0 [s], got {horizon!r}")
+    info = _info(model, object_body)
+    in_obj, obj = info.in_obj, info.obj
+    n_servo = len(info.dofs)
+    x_o = data.xpos[obj].copy()
+    R_o = data.xmat[obj].reshape(3, 3).copy()
+    ids, bodies, sign = [], [], []
+    geom_body = model.geom_bodyid
+    con = data.contact
+    if data.ncon:
+        geom, adr, excl = con.geom.tolist(), con.efc_address.tolist(), con.exclude.tolist()
+        for i, (g1, g2) in enumerate(geom):
+            if adr[i] < 0 or excl[i]:
+                continue
+            b1, b2 = int(geom_body[g1]), int(geom_body[g2])
+            o1, o2 = in_obj[b1], in_obj[b2]
+            if o1 == o2:
+                continue
+            ids.append(i)
+            bodies.append(b2 if o1 else b1)
+            sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
+    m = len(ids)
+    if m == 0:
+        z = np.zeros
+        return GraspLinearization(
+            np.zeros(0, np.int64), np.zeros(0, np.int64), [], z((0, 3)), z((0, 3, 3)),
+            z((0, 3)), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(), z((0, 0)),
+            z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
+        )  # fmt: skip
+    idx = np.array(ids)
+    dims = con.dim[idx]
+    if np.any(dims < 3):
+        raise ShieldError("a frictionless (condim 1) object contact is not modelled")
+    s = np.array(sign)
+    frames = con.frame[idx].reshape(m, 3, 3).copy()
+    frames[:, 0] *= s[:, None]
+    frames[:, 1] *= s[:, None]
+    a = con.efc_address[idx]
+    ef = data.efc_force
+    # elliptic cone: the rows a, a+1, a+2 are the force of geom1 on geom2 in MuJoCo's frame;
+    # in the flipped frame the force of the hand on the object has the same numbers for
+    # (n, t1) and the opposite t2 when the object is geom1
+    forces = np.stack([ef[a], ef[a + 1], ef[a + 2] * s], axis=1)
+    points = con.pos[idx].copy()
+    mu = con.friction[idx, 0].copy()
+    kbip, R = data.efc_KBIP, data.efc_R
+    c_n = R[a] / (kbip[a, 0] * kbip[a, 2])
+    c_t = R[a + 1] * horizon / kbip[a + 1, 1]
+    C_contact = np.stack([c_n, c_t, c_t], axis=1).reshape(-1)
+    # grasp map, world axes: f = frame^T c, torque = (p - x_o) x f = [r]_x frame^T c
+    Ft = frames.transpose(0, 2, 1)  # (m, 3, 3): columns n, t1, t2 in world
+    r = points - x_o
+    rx = np.zeros((m, 3, 3))
+    rx[:, 0, 1], rx[:, 0, 2], rx[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
+    rx[:, 1, 0], rx[:, 2, 0], rx[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
+    G = np.concatenate([Ft, rx @ Ft], axis=1).transpose(1, 0, 2).reshape(6, 3 * m)
+    J = np.zeros((3 * m, n_servo))
+    jacp = np.zeros((3, model.nv))
+    for k in range(m):
+        b = bodies[k]
+        if model.body_weldid[b] == 0:
+            continue  # static body: no motion
+        mujoco.mj_jac(model, data, jacp, None, points[k], b)
+        J[3 * k : 3 * k + 3] = frames[k] @ jacp[:, info.dofs]
+    C = (J * info.C_joint) @ J.T
+    C[np.diag_indices_from(C)] += C_contact
+    K = np.linalg.inv(C)
+    K = 0.5 * (K + K.T)
+    GK = G @ K
+    GKGt = GK @ G.T
+    # pseudo-inverse of the symmetric PSD 6 x 6 matrix through its eigen-decomposition
+    lam, V = np.linalg.eigh(GKGt)
+    keep = lam > 1e-10 * max(float(lam[-1]), 1e-300)
+    Vk = V[:, keep]
+    F = (Vk / lam[keep]) @ (Vk.T @ (GK @ J))
+    E = K @ (J - G.T @ F)
+    return GraspLinearization(
+        contact_ids=idx.astype(np.int64),
+        bodies=np.array(bodies, dtype=np.int64),
+        links=[info.names[b] for b in bodies],
+        points=points,
+        frames=frames,
+        forces=forces,
+        mu=mu,
+        G=G,
+        J=J,
+        C_contact=C_contact,
+        C_joint=info.C_joint.copy(),
+        K=K,
+        F=F,
+        E=E,
+        object_pos=x_o,
+        object_mat=R_o,
+        horizon=float(horizon),
+    )

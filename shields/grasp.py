@@ -1,0 +1,509 @@
+"""The linearised-compliance QP shield for in-hand manipulation (thesis sec. "Constructing a
+shield for in-hand manipulation", eqs. force_constr .. optimization).
+
+Given the agent's action ``a`` (servo setpoint change ``dq = s a``, ``s`` the env's
+``max_setpoint_step`` [rad]) at the current MuJoCo state, :class:`GraspQP` returns the action
+``a~`` nearest to ``a`` whose one-step prediction under the linearised grasp
+(:func:`shields.compliance.linearize`: ``c' = c + E dq``, ``u' = u + F dq``) keeps a
+force-closure subset of the contacts stable and the object inside its box::
+
+    minimise  ||a~ - a||^2
+    s.t.      c'_n,i >= c_min                                   shielded contacts i
+              e_j . c'_t,i <= mu_i cos(pi / k) c'_n,i, j = 1..k   (inscribed k-gon cone)
+              box_low <= p' <= box_high                          object position [m], world
+              tilt_low <= r_x', r_y' <= tilt_high                object tilt [rad]
+              a~_j = a_j  for every servo j in the kinematic chain of an unshielded contact
+              a~ in [-1, 1]^l, ctrl + s a~ within the servos' ctrlrange
+
+The friction constraint's right-hand side is ``mu c_n`` (the thesis prints ``mu t_normal``)
+and the polygon with ``k`` edges inscribed in the circle of radius ``mu c_n`` has the apothem
+``mu cos(pi / k) c_n``. The tilt angles are the thesis' (eq. rot_constr): with ``z`` the
+object's z axis in world coordinates, ``r_x = atan2(z_y, z_z)`` and ``r_y = atan2(-z_x,
+z_z)`` (the signed angle between the projection of ``z`` onto the world yz (xz) plane and
+world +Z), linearised in the object's rotation. A box or tilt bound the object already
+violates is relaxed to its current value (the shield then forbids moving further out).
+
+Contact subsets (thesis' enumeration): the contacts of one hand link are shielded or not
+together (a link is the unit the observation reports). Every set of at least two touching
+links whose contacts are in force closure is a candidate (tested on the inscribed friction
+pyramids' primitive wrenches, the Ferrari-Canny construction of :mod:`stability.gws`; a
+superset of a force-closure set is one too, so only minimal sets are tested). The servos of
+the unshielded links' kinematic chains keep the agent's action. The candidate with the
+smallest ``||a~ - a||`` wins, ties to the one that shields more contacts.
+
+Outcomes (``ShieldResult.status``):
+
+* ``"safe"``: ``a`` itself satisfies some candidate's constraints; returned unchanged.
+* ``"corrected"``: the best candidate's QP solution.
+* ``"fallback"``: no candidate's QP is feasible: the zero action (keep every setpoint).
+  The shield never raises inside a step for this.
+* ``"no_closure"``: fewer than two links touch the object, or no set of them is in force
+  closure: there is no stable grasp to keep, and ``a`` passes unchanged.
+
+QP backends: DAQP (default; a dual active-set solver for small dense QPs, one solve per
+candidate with ``H = I``) and OSQP (one setup per step, i.e. one KKT factorisation; each
+candidate only updates the bounds: unshielded rows to +-inf, fixed servos to ``l = u``).
+Both results are verified against the linear model before they are used.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from itertools import combinations
+from typing import Any
+
+import daqp
+import mujoco
+import numpy as np
+import osqp
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from shields.compliance import GraspLinearization, ShieldError, linearize
+
+__all__ = [
+    "BACKENDS",
+    "STATUSES",
+    "GraspQP",
+    "ShieldLimits",
+    "ShieldProblem",
+    "ShieldResult",
+    "force_closure_wrenches",
+    "tilt_angles",
+]
+
+BACKENDS = ("daqp", "osqp")
+STATUSES = ("safe", "corrected", "fallback", "no_closure")
+_INF = 1e30  # DAQP's infinity
+_TOL = 1e-6  # accepted constraint violation of a returned action under the linear model
+
+
+@dataclass(frozen=True)
+class ShieldLimits:
+    """The shield's constraints (module docstring).
+
+    c_min : least normal force of a shielded contact [N]
+    edges : edges ``k`` of the inscribed friction pyramid (>= 3)
+    box_low, box_high : object origin box, world [m] (the four-finger env drops below
+        ``z = 0.05`` or outside 0.045 m from the palm axis; the object rests at ``z`` 0.077)
+    tilt_low, tilt_high : bounds on ``r_x`` and ``r_y`` [rad]
+    """
+
+    c_min: float = 0.05
+    edges: int = 8
+    box_low: tuple[float, float, float] = (-0.03, -0.03, 0.06)
+    box_high: tuple[float, float, float] = (0.03, 0.03, 0.12)
+    tilt_low: float = -0.5
+    tilt_high: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.c_min) and self.c_min >= 0):
+            raise ShieldError(f"c_min must be a finite number >= 0 [N], got {self.c_min!r}")
+        if isinstance(self.edges, bool) or not isinstance(self.edges, int) or self.edges < 3:
+            raise ShieldError(f"edges must be an integer >= 3, got {self.edges!r}")
+        lo, hi = np.asarray(self.box_low, float), np.asarray(self.box_high, float)
+        if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo) & np.isfinite(hi)):
+            raise ShieldError("box_low and box_high must be 3 finite numbers [m]")
+        if np.any(lo >= hi):
+            raise ShieldError(f"box_low {lo.tolist()} must be below box_high {hi.tolist()}")
+        if not (np.isfinite(self.tilt_low) and np.isfinite(self.tilt_high)):
+            raise ShieldError("tilt_low and tilt_high must be finite [rad]")
+        if not -np.pi < self.tilt_low < self.tilt_high < np.pi:
+            raise ShieldError("need -pi < tilt_low < tilt_high < pi [rad]")
+
+
+@dataclass
+class ShieldResult:
+    """What the shield did in one step.
+
+    action : (l,) the action to execute, ``a~``
+    status : one of :data:`STATUSES`
+    links : names of the shielded links (empty for ``"fallback"`` and ``"no_closure"``)
+    correction : ``||a~ - a||`` (Euclidean, action units)
+    candidates : force-closure link sets the QPs were solved for (1 when the agent's action
+        is safe: the set it keeps)
+    qps : QPs solved
+    violation : largest constraint violation of ``a~`` under the linear model, for its
+        candidate's constraints (<= 1e-6 for ``"safe"`` and ``"corrected"``) [N, m, rad]
+    solve_time_s : wall time of the whole shield call, linearisation included [s]
+    """
+
+    action: NDArray[np.float64]
+    status: str
+    links: tuple[str, ...]
+    correction: float
+    candidates: int
+    qps: int
+    violation: float
+    solve_time_s: float
+
+
+@dataclass
+class ShieldProblem:
+    """The constraints of one step, all as ``low <= A a~ <= high`` (for tests and logging).
+
+    lin : the linearised grasp; groups : contact indices of each touching hand link;
+    links : their names; chains : (n_groups, l) servos in each link's kinematic chain;
+    A_contact (m, 1 + k, l), low_contact (m, 1 + k): rows of each contact (normal force,
+    then the k friction edges; upper bound +inf); A_global (5, l), low_global, high_global:
+    object position (3) and tilt (2) rows; x_low, x_high: action bounds (l,);
+    W_groups : per link, the primitive wrenches of its contacts' friction pyramids (torques
+    divided by the grasp's largest contact distance from the object origin).
+    """
+
+    lin: GraspLinearization
+    groups: list[list[int]]
+    links: list[str]
+    chains: NDArray[np.bool_]
+    A_contact: NDArray[np.float64]
+    low_contact: NDArray[np.float64]
+    A_global: NDArray[np.float64]
+    low_global: NDArray[np.float64]
+    high_global: NDArray[np.float64]
+    x_low: NDArray[np.float64]
+    x_high: NDArray[np.float64]
+    W_groups: list[NDArray[np.float64]]
+    _closure: dict[int, bool] = field(default_factory=dict)
+    _candidates: list[int] | None = None
+
+    def closure(self, mask: int) -> bool:
+        """Force closure of the contacts of the links in ``mask`` (memoised; a superset of a
+        force-closure set is one; fewer than three point contacts never are)."""
+        hit = self._closure.get(mask)
+        if hit is not None:
+            return hit
+        members = [g for g in range(len(self.groups)) if mask >> g & 1]
+        if sum(len(self.groups[g]) for g in members) < 3 or len(members) < 2:
+            ok = False
+        elif any(self._closure.get(mask & ~(1 << g), False) for g in members):
+            ok = True
+        else:
+            ok = force_closure_wrenches(np.concatenate([self.W_groups[g] for g in members]))
+        self._closure[mask] = ok
+        return ok
+
+    @property
+    def candidates(self) -> list[int]:
+        """Bit masks of the link sets (>= 2 links) in force closure, smallest first."""
+        if self._candidates is None:
+            n = len(self.groups)
+            self._candidates = [
+                mask for size in range(2, n + 1) for mask in _masks(n, size) if self.closure(mask)
+            ]
+        return self._candidates
+
+    def rows(self, mask: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray]:
+        """``(A, low, high)`` of candidate ``mask``: its shielded contacts' rows, then the
+        global rows."""
+        idx = [i for g, members in enumerate(self.groups) if mask >> g & 1 for i in members]
+        k1 = self.A_contact.shape[1]
+        A = np.concatenate([self.A_contact[idx].reshape(-1, self.A_global.shape[1]), self.A_global])
+        low = np.concatenate([self.low_contact[idx].reshape(-1), self.low_global])
+        high = np.concatenate([np.full(len(idx) * k1, np.inf), self.high_global])
+        return A, low, high
+
+    def fixed(self, mask: int) -> NDArray[np.bool_]:
+        """Servos the candidate ``mask`` fixes to the agent's action (unshielded chains)."""
+        out = np.zeros(self.chains.shape[1], dtype=bool)
+        for g in range(len(self.groups)):
+            if not mask >> g & 1:
+                out |= self.chains[g]
+        return out
+
+    def violation(self, mask: int, x: NDArray[np.float64]) -> float:
+        """Largest violation of candidate ``mask``'s rows and the action bounds by ``x``."""
+        A, low, high = self.rows(mask)
+        y = A @ x
+        v = max(float(np.max(low - y, initial=0.0)), float(np.max(y - high, initial=0.0)))
+        v = max(v, float(np.max(self.x_low - x, initial=0.0)))
+        return max(v, float(np.max(x - self.x_high, initial=0.0)))
+
+
+def tilt_angles(object_mat: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray]:
+    """``(r, dr)``: the thesis' tilt angles ``r = (r_x, r_y)`` [rad] of an object with the
+    rotation matrix ``object_mat`` (columns: its axes in world), and their gradient (2, 3)
+    with respect to a small world rotation vector ``dtheta`` (``r' ~ r + dr dtheta``)."""
+    z = np.asarray(object_mat, dtype=np.float64)[:, 2]
+    zx, zy, zz = z
+    r = np.array([np.arctan2(zy, zz), np.arctan2(-zx, zz)])
+    # dr = g . dz with dz = dtheta x z, so dr/dtheta = z x g
+    n_x, n_y = zy * zy + zz * zz, zx * zx + zz * zz
+    # z x (0, zz, -zy) and z x (-zz, 0, zx), written out
+    d_x = np.array([-zy * zy - zz * zz, zx * zy, zx * zz]) / max(n_x, 1e-300)
+    d_y = np.array([zx * zy, -zx * zx - zz * zz, zy * zz]) / max(n_y, 1e-300)
+    return r, np.stack([d_x, d_y])
+
+
+def _pyramid(edges: int) -> tuple[NDArray[np.float64], float]:
+    theta = 2.0 * np.pi * np.arange(edges) / edges
+    return np.stack([np.cos(theta), np.sin(theta)], axis=1), float(np.cos(np.pi / edges))
+
+
+def force_closure_wrenches(W: NDArray[np.float64]) -> bool:
+    """Whether the wrenches ``W`` (K, 6) positively span R^6: the origin is strictly inside
+    their convex hull (force closure of the contacts whose primitive wrenches they are,
+    :func:`stability.gws.primitive_wrenches`).
+
+    Test: ``rank W = 6`` and some ``lambda >= 1`` has ``W^T lambda = 0`` (a strictly
+    positive combination that cancels), decided by one small QP (DAQP). Scale torques to
+    forces before calling (the test is invariant to that scaling, its tolerances are not).
+    """
+    W = np.asarray(W, dtype=np.float64)
+    if W.ndim != 2 or W.shape[1] != 6 or len(W) < 7:
+        return False
+    ev = np.linalg.eigvalsh(W.T @ W)  # rank 6 <=> W^T W positive definite
+    if not ev[0] > 1e-12 * max(float(ev[-1]), 1e-300):
+        return False
+    k = len(W)
+    # min 0.5 |lambda|^2  s.t.  lambda >= 1 (bounds), W^T lambda = 0 (equalities)
+    lo = np.concatenate([np.ones(k), np.zeros(6)])
+    hi = np.concatenate([np.full(k, _INF), np.zeros(6)])
+    sense = np.concatenate([np.zeros(k, np.int32), np.full(6, 5, np.int32)])
+    x, _, flag, _ = daqp.solve(np.eye(k), np.zeros(k), np.ascontiguousarray(W.T), hi, lo, sense)
+    if flag < 1:
+        return False
+    return bool(np.abs(W.T @ x).max() <= 1e-7 * max(float(np.abs(x).sum()), 1.0))
+
+
+class GraspQP:
+    """The QP shield of the module docstring for one MuJoCo model.
+
+    Parameters
+    ----------
+    model : the scene (position servos on hinges, elliptic cone; see
+        :func:`shields.compliance.linearize`).
+    max_setpoint_step : ``s`` [rad]: the setpoint change is ``dq = s a~``.
+    horizon : the prediction horizon [s] (the policy period).
+    limits : :class:`ShieldLimits`.
+    backend : ``"daqp"`` (default) or ``"osqp"``.
+    object_body : the object's body name.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        *,
+        max_setpoint_step: float,
+        horizon: float,
+        limits: ShieldLimits | None = None,
+        backend: str = "daqp",
+        object_body: str = "object",
+    ) -> None:
+        if backend not in BACKENDS:
+            raise ShieldError(f"unknown QP backend {backend!r}; choose one of {BACKENDS}")
+        if not (np.isfinite(max_setpoint_step) and max_setpoint_step > 0):
+            raise ShieldError(f"max_setpoint_step must be > 0 [rad], got {max_setpoint_step!r}")
+        if not (np.isfinite(horizon) and horizon > 0):
+            raise ShieldError(f"horizon must be > 0 [s], got {horizon!r}")
+        self.model = model
+        self.step = float(max_setpoint_step)
+        self.horizon = float(horizon)
+        self.limits = ShieldLimits() if limits is None else limits
+        if not isinstance(self.limits, ShieldLimits):
+            raise ShieldError(f"limits must be a ShieldLimits, got {type(limits).__name__}")
+        self.backend = backend
+        self.object_body = object_body
+        self.l = model.nu
+        self.ctrl_low = model.actuator_ctrlrange[:, 0].copy()
+        self.ctrl_high = model.actuator_ctrlrange[:, 1].copy()
+        limited = model.actuator_ctrllimited.astype(bool)
+        self.ctrl_low[~limited], self.ctrl_high[~limited] = -np.inf, np.inf
+        # servos in each body's kinematic chain (the dofs of the body and its ancestors)
+        servo_dof = model.jnt_dofadr[model.actuator_trnid[:, 0]]
+        self.chain = np.zeros((model.nbody, self.l), dtype=bool)
+        for b in range(1, model.nbody):
+            dofs = set(range(model.body_dofadr[b], model.body_dofadr[b] + model.body_dofnum[b]))
+            self.chain[b] = self.chain[model.body_parentid[b]] | np.isin(servo_dof, list(dofs))
+        self.dirs, self.apothem = _pyramid(self.limits.edges)
+        # check the model once (raises ShieldError for what linearize cannot model)
+        linearize(model, mujoco.MjData(model), object_body, horizon=self.horizon)
+        self.last_problem: ShieldProblem | None = None
+
+    # -- the problem ---------------------------------------------------------------------
+    def problem(self, data: mujoco.MjData) -> ShieldProblem:
+        """Linearise the grasp at ``data`` and build every constraint row."""
+        lin = linearize(self.model, data, self.object_body, horizon=self.horizon)
+        lim, s = self.limits, self.step
+        k = len(self.dirs)
+        groups: dict[int, list[int]] = {}
+        for i, b in enumerate(lin.bodies.tolist()):
+            if self.model.body_weldid[b] != 0:  # hand links only; palm/floor are fixed
+                groups.setdefault(b, []).append(i)
+        bodies = list(groups)
+        m = lin.m
+        E = lin.E.reshape(m, 3, self.l) * s
+        c = lin.forces
+        A_c = np.empty((m, 1 + k, self.l))
+        low_c = np.empty((m, 1 + k))
+        A_c[:, 0] = E[:, 0]
+        low_c[:, 0] = lim.c_min - c[:, 0]
+        mu_a = (lin.mu * self.apothem)[:, None]
+        # mu' (c_n + E_n dq) - e_j . (c_t + E_t dq) >= 0
+        A_c[:, 1:] = mu_a[:, :, None] * E[:, None, 0]
+        A_c[:, 1:] -= np.einsum("jt,mtl->mjl", self.dirs, E[:, 1:])
+        low_c[:, 1:] = -(mu_a * c[:, :1] - c[:, 1:] @ self.dirs.T)
+        p = lin.object_pos
+        r, dr = tilt_angles(lin.object_mat)
+        A_g = np.concatenate([lin.F[:3], dr @ lin.F[3:]]) * s
+        low_g = np.concatenate([np.asarray(lim.box_low) - p, lim.tilt_low - r])
+        high_g = np.concatenate([np.asarray(lim.box_high) - p, lim.tilt_high - r])
+        low_g, high_g = np.minimum(low_g, 0.0), np.maximum(high_g, 0.0)
+        ctrl = data.ctrl
+        x_low = np.maximum(-1.0, (self.ctrl_low - ctrl) / s)
+        x_high = np.minimum(1.0, (self.ctrl_high - ctrl) / s)
+        # primitive wrenches of each contact's pyramid edges, torques over a length scale
+        L = max(float(np.abs(lin.points - lin.object_pos).max(initial=0.0)), 1e-3)
+        e = np.empty((m, k, 3))
+        e[:, :, 0] = 1.0
+        e[:, :, 1:] = lin.mu[:, None, None] * self.dirs[None]
+        Gm = lin.G.reshape(6, m, 3).transpose(1, 0, 2)  # (m, 6, 3)
+        W = np.einsum("mwc,mkc->mkw", Gm, e)
+        W[:, :, 3:] /= L
+        prob = ShieldProblem(
+            lin=lin,
+            groups=[groups[b] for b in bodies],
+            links=[lin.links[groups[b][0]] for b in bodies],
+            chains=self.chain[bodies] if bodies else np.zeros((0, self.l), dtype=bool),
+            A_contact=A_c,
+            low_contact=low_c,
+            A_global=A_g,
+            low_global=low_g,
+            high_global=high_g,
+            x_low=np.minimum(x_low, 0.0),
+            x_high=np.maximum(x_high, 0.0),
+            W_groups=[W[groups[b]].reshape(-1, 6) for b in bodies],
+        )
+        return prob
+
+    # -- the shield ----------------------------------------------------------------------
+    def __call__(self, data: mujoco.MjData, action: NDArray[Any]) -> ShieldResult:
+        """Shield ``action`` (l,) in ``[-1, 1]`` at the state ``data`` (after a step or
+        ``mj_forward``)."""
+        t0 = time.perf_counter()
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (self.l,):
+            raise ShieldError(f"action must have shape ({self.l},), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ShieldError(f"action contains NaN or inf: {a}")
+        prob = self.problem(data)
+        self.last_problem = prob
+        a_eff = np.minimum(np.maximum(a, prob.x_low), prob.x_high)
+        n = len(prob.groups)
+        full = (1 << n) - 1
+
+        def done(
+            x: NDArray, status: str, mask: int, cands: int, qps: int, viol: float
+        ) -> ShieldResult:
+            links = tuple(prob.links[g] for g in range(n) if mask >> g & 1)
+            return ShieldResult(
+                action=x,
+                status=status,
+                links=links,
+                correction=float(np.linalg.norm(x - a)),
+                candidates=cands,
+                qps=qps,
+                violation=viol,
+                solve_time_s=time.perf_counter() - t0,
+            )
+
+        # the agent's action: it is safe if the links whose constraints it satisfies are in
+        # force closure (every candidate is a subset of that set or violated)
+        tol = _TOL
+        y_g = prob.A_global @ a_eff
+        in_box = np.all(y_g >= prob.low_global - tol) and np.all(y_g <= prob.high_global + tol)
+        if n >= 2 and in_box:
+            slack = (prob.A_contact @ a_eff - prob.low_contact).min(axis=1)
+            ok = 0
+            for g, members in enumerate(prob.groups):
+                if slack[members].min() >= -tol:
+                    ok |= 1 << g
+            if prob.closure(ok):
+                return done(a.copy(), "safe", ok, 1, 0, prob.violation(ok, a_eff))
+        if n < 2 or not prob.closure(full):
+            return done(a.copy(), "no_closure", 0, 0, 0, 0.0)
+        solve = self._solve_daqp if self.backend == "daqp" else self._solve_osqp
+        best_x, best_mask, best_obj, best_viol, qps = None, 0, np.inf, 0.0, 0
+        for mask, x in solve(prob, a, a_eff):
+            qps += 1
+            if x is None:
+                continue
+            viol = prob.violation(mask, x)
+            if viol > tol:
+                continue
+            obj = float(np.sum((x - a) ** 2))
+            better = obj < best_obj - 1e-12 or (
+                obj <= best_obj + 1e-12 and bin(mask).count("1") > bin(best_mask).count("1")
+            )
+            if better:
+                best_x, best_mask, best_obj, best_viol = x, mask, obj, viol
+        if best_x is None:
+            return done(np.zeros(self.l), "fallback", 0, len(prob.candidates), qps, 0.0)
+        return done(best_x, "corrected", best_mask, len(prob.candidates), qps, best_viol)
+
+    def _solve_daqp(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray):
+        """One DAQP solve per candidate over its free servos; yields ``(mask, x or None)``."""
+        for mask in prob.candidates:
+            fixed = prob.fixed(mask)
+            free = ~fixed
+            nf = int(free.sum())
+            A, low, high = prob.rows(mask)
+            if nf == 0:
+                yield mask, None
+                continue
+            shift = A[:, fixed] @ a_eff[fixed]
+            bl = np.concatenate([prob.x_low[free], low - shift])
+            bu = np.concatenate([prob.x_high[free], np.minimum(high - shift, _INF)])
+            bl = np.maximum(bl, -_INF)
+            y, _, flag, _ = daqp.solve(
+                np.eye(nf), -a[free], np.ascontiguousarray(A[:, free]), bu, bl,
+                np.zeros(len(bu), dtype=np.int32),
+            )  # fmt: skip
+            if flag < 1:
+                yield mask, None
+                continue
+            x = a_eff.copy()
+            x[free] = np.minimum(np.maximum(y, prob.x_low[free]), prob.x_high[free])
+            yield mask, x
+
+    def _solve_osqp(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray):
+        """One OSQP setup (factorisation) per step; per candidate only bounds change."""
+        n = self.l
+        m = prob.lin.m
+        k1 = prob.A_contact.shape[1]
+        A = np.concatenate([np.eye(n), prob.A_contact.reshape(-1, n), prob.A_global])
+        n_c = m * k1
+        low0 = np.concatenate([prob.x_low, np.full(n_c, -np.inf), prob.low_global])
+        high0 = np.concatenate([prob.x_high, np.full(n_c, np.inf), prob.high_global])
+        solver = osqp.OSQP()
+        solver.setup(
+            P=sp.identity(n, format="csc"), q=-a, A=sp.csc_matrix(A), l=low0, u=high0,
+            verbose=False, eps_abs=1e-8, eps_rel=1e-8, polishing=True, max_iter=4000,
+        )  # fmt: skip
+        contact_rows = np.arange(n_c).reshape(m, k1) + n
+        for mask in prob.candidates:
+            low, high = low0.copy(), high0.copy()
+            for g, members in enumerate(prob.groups):
+                if mask >> g & 1:
+                    rows = contact_rows[members].reshape(-1)
+                    low[rows] = prob.low_contact[members].reshape(-1)
+            fixed = prob.fixed(mask)
+            low[:n][fixed] = high[:n][fixed] = a_eff[fixed]
+            solver.update(l=low, u=high)
+            res = solver.solve()
+            if res.info.status_val not in (1, 2):  # solved, solved inaccurate
+                yield mask, None
+                continue
+            x = np.minimum(np.maximum(res.x, prob.x_low), prob.x_high)
+            x[fixed] = a_eff[fixed]
+            yield mask, x
+
+
+def _masks(n: int, size: int) -> Iterator[int]:
+    """Bit masks of the ``size``-element subsets of ``range(n)``."""
+    for combo in combinations(range(n), size):
+        mask = 0
+        for g in combo:
+            mask |= 1 << g
+        yield mask
