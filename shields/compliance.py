@@ -10,6 +10,10 @@ Conventions (DESIGN.md, with the axes stated here)
 -------------------------------------------------
 * Contact ``i`` has the frame ``[n, t1, t2]`` (rows, world coordinates), ``n`` pointing INTO
   the object; ``c_i = (c_n, c_t1, c_t2)`` is the force of the hand on the object in it [N].
+  Where contacts have torsional friction (MuJoCo ``condim`` 4, the four-finger env), each
+  contact has a fourth component, the moment ``c_tau`` of the hand on the object about
+  ``n`` [N m] (a soft-finger contact), with its column ``(0, n)`` in ``G`` and the hand
+  link's rotation about ``n`` in ``J``: ``nc = 4`` components per contact, else 3.
 * ``G`` (6 x 3m) gives the wrench on the object about the object body's origin, in WORLD
   axes: ``w = G c`` with ``w = (f, torque)`` [N, N m]. (``ihm.grasp_from_mujoco`` expresses
   the same ``G`` in object axes; the shield's box and tilt limits are in world axes.)
@@ -40,6 +44,11 @@ Compliance
   constant tangential force MuJoCo's contact creeps at ``v = R_t c_t / B`` instead of
   springing back. Over the prediction horizon ``h`` (the policy period) that is the
   compliance ``R_t h / B`` [m/N] (about 1.1e-5 m/N at ``h`` = 0.05 s, impratio 100).
+  The torsional row creeps the same way: ``R_tau h / B`` [rad/(N m)] (0.43 here). Leaving
+  it out (a point contact) doubles the prediction error on the four-finger grasps: the
+  fingertip's twist about the contact normal is the abduction joint's rotation, and the
+  torsional friction couples it to the object. Of the horizons tried (0.0125 to 0.1 s),
+  the policy period ``h = 0.05 s`` predicts MuJoCo's step best.
 
 Object motion and contact forces (Bicchi)
 -----------------------------------------
@@ -88,15 +97,18 @@ class GraspLinearization:
     links : (m,) names of those bodies
     points : (m, 3) contact points, world [m]
     frames : (m, 3, 3) rows ``n, t1, t2``, world, ``n`` into the object
-    forces : (m, 3) ``c = (c_n, c_t1, c_t2)`` MuJoCo computed [N]
+    forces : (m, nc) ``c = (c_n, c_t1, c_t2[, c_tau])`` MuJoCo computed [N, N m]
     mu : (m,) sliding friction coefficients
-    G : (6, 3m) grasp map, world axes, about ``object_pos``
-    J : (3m, l) setpoints [rad] -> hand contact-point motion in contact frames [m]
-    C_contact : (3m,) diagonal contact compliance [m/N] (normal, t1, t2 per contact)
+    mu_torsion : (m,) torsional friction coefficients [m] (0: none)
+    G : (6, nc m) grasp map, world axes, about ``object_pos``
+    J : (nc m, l) setpoints [rad] -> hand contact-point motion in contact frames [m] (and
+        the hand link's rotation about the normal [rad])
+    C_contact : (nc m,) diagonal contact compliance [m/N] (normal, t1, t2 per contact; the
+        torsional one [rad/(N m)])
     C_joint : (l,) servo compliance ``1 / kp`` [rad/(N m)]
-    K : (3m, 3m) grasp stiffness ``(C_contact + J C_joint J^T)^{-1}`` [N/m]
+    K : (nc m, nc m) grasp stiffness ``(C_contact + J C_joint J^T)^{-1}`` [N/m]
     F : (6, l) object motion per setpoint change, ``du = F dq`` [m/rad, rad/rad]
-    E : (3m, l) contact-force change per setpoint change, ``dc = E dq`` [N/rad]
+    E : (nc m, l) contact-force change per setpoint change, ``dc = E dq`` [N/rad]
     object_pos : (3,) object body origin, world [m]
     object_mat : (3, 3) object body orientation (columns: its axes in world)
     horizon : prediction horizon of the tangential creep compliance [s]
@@ -109,6 +121,7 @@ class GraspLinearization:
     frames: NDArray[np.float64]
     forces: NDArray[np.float64]
     mu: NDArray[np.float64]
+    mu_torsion: NDArray[np.float64]
     G: NDArray[np.float64]
     J: NDArray[np.float64]
     C_contact: NDArray[np.float64]
@@ -125,11 +138,16 @@ class GraspLinearization:
         """Number of contacts."""
         return len(self.contact_ids)
 
+    @property
+    def nc(self) -> int:
+        """Components per contact: 3 (force) or 4 (force and torsional moment)."""
+        return self.forces.shape[1]
+
     def predict(self, dq: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(c + E dq, F dq)``: predicted contact forces (m, 3) [N] and object motion ``du``
+        """``(c + E dq, F dq)``: predicted contact forces (m, nc) [N] and object motion ``du``
         (6,) [m, rad] for the setpoint change ``dq`` (l,) [rad]."""
         dq = np.asarray(dq, dtype=np.float64)
-        return self.forces + (self.E @ dq).reshape(-1, 3), self.F @ dq
+        return self.forces + (self.E @ dq).reshape(self.m, -1), self.F @ dq
 
 
 class _HandInfo:
@@ -247,44 +265,66 @@ def linearize(
         z = np.zeros
         return GraspLinearization(
             np.zeros(0, np.int64), np.zeros(0, np.int64), [], z((0, 3)), z((0, 3, 3)),
-            z((0, 3)), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(), z((0, 0)),
-            z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
+            z((0, 3)), z(0), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(),
+            z((0, 0)), z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
         )  # fmt: skip
     idx = np.array(ids)
     dims = con.dim[idx]
-    if np.any(dims < 3):
-        raise ShieldError("a frictionless (condim 1) object contact is not modelled")
+    if np.any(dims < 3) or np.any(dims > 4):
+        raise ShieldError(
+            "object contacts must have condim 3 (point contact with friction) or 4 (with "
+            f"torsional friction); got {sorted(set(dims.tolist()))}"
+        )
+    nc = 4 if np.any(dims == 4) else 3
     s = np.array(sign)
     frames = con.frame[idx].reshape(m, 3, 3).copy()
     frames[:, 0] *= s[:, None]
     frames[:, 1] *= s[:, None]
     a = con.efc_address[idx]
     ef = data.efc_force
-    # elliptic cone: the rows a, a+1, a+2 are the force of geom1 on geom2 in MuJoCo's frame;
-    # in the flipped frame the force of the hand on the object has the same numbers for
-    # (n, t1) and the opposite t2 when the object is geom1
+    # elliptic cone: the rows a, a+1, a+2 (a+3) are the force (and moment about the normal)
+    # on geom2 in MuJoCo's frame; in the frame flipped when the object is geom1, the force of
+    # the hand on the object has the same (n, t1) numbers and the opposite t2, and the moment
+    # about the (flipped) normal is the same number
     forces = np.stack([ef[a], ef[a + 1], ef[a + 2] * s], axis=1)
     points = con.pos[idx].copy()
-    mu = con.friction[idx, 0].copy()
+    fr = con.friction[idx]
+    mu = fr[:, 0].copy()
     kbip, R = data.efc_KBIP, data.efc_R
     c_n = R[a] / (kbip[a, 0] * kbip[a, 2])
     c_t = R[a + 1] * horizon / kbip[a + 1, 1]
-    C_contact = np.stack([c_n, c_t, c_t], axis=1).reshape(-1)
-    # grasp map, world axes: f = frame^T c, torque = (p - x_o) x f = [r]_x frame^T c
+    comp = [c_n, c_t, c_t]
+    if nc == 4:
+        tors = dims == 4
+        a3 = np.where(tors, a + 3, a)
+        forces = np.concatenate([forces, np.where(tors, ef[a3], 0.0)[:, None]], axis=1)
+        # a condim-3 contact has no torsional friction: a (practically) free twist
+        comp.append(np.where(tors, R[a3] * horizon / kbip[a3, 1], 1e9))
+    C_contact = np.stack(comp, axis=1).reshape(-1)
+    # grasp map, world axes: f = frame^T c, torque = (p - x_o) x f = [r]_x frame^T c, and the
+    # torsional moment c_tau about n
     Ft = frames.transpose(0, 2, 1)  # (m, 3, 3): columns n, t1, t2 in world
     r = points - x_o
     rx = np.zeros((m, 3, 3))
     rx[:, 0, 1], rx[:, 0, 2], rx[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
     rx[:, 1, 0], rx[:, 2, 0], rx[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
-    G = np.concatenate([Ft, rx @ Ft], axis=1).transpose(1, 0, 2).reshape(6, 3 * m)
-    J = np.zeros((3 * m, n_servo))
+    Gc = np.zeros((m, 6, nc))
+    Gc[:, :3, :3] = Ft
+    Gc[:, 3:, :3] = rx @ Ft
+    if nc == 4:
+        Gc[:, 3:, 3] = frames[:, 0]
+    G = Gc.transpose(1, 0, 2).reshape(6, nc * m)
+    J = np.zeros((nc * m, n_servo))
     jacp = np.zeros((3, model.nv))
+    jacr = np.zeros((3, model.nv)) if nc == 4 else None
     for k in range(m):
         b = bodies[k]
         if model.body_weldid[b] == 0:
             continue  # static body: no motion
-        mujoco.mj_jac(model, data, jacp, None, points[k], b)
-        J[3 * k : 3 * k + 3] = frames[k] @ jacp[:, info.dofs]
+        mujoco.mj_jac(model, data, jacp, jacr, points[k], b)
+        J[nc * k : nc * k + 3] = frames[k] @ jacp[:, info.dofs]
+        if jacr is not None:
+            J[nc * k + 3] = frames[k, 0] @ jacr[:, info.dofs]
     C = (J * info.C_joint) @ J.T
     C[np.diag_indices_from(C)] += C_contact
     K = np.linalg.inv(C)
@@ -305,6 +345,7 @@ def linearize(
         frames=frames,
         forces=forces,
         mu=mu,
+        mu_torsion=fr[:, 2].copy() if nc == 4 else np.zeros(m),
         G=G,
         J=J,
         C_contact=C_contact,

@@ -9,7 +9,7 @@ force-closure subset of the contacts stable and the object inside its box::
 
     minimise  ||a~ - a||^2
     s.t.      c'_n,i >= c_min                                   shielded contacts i
-              e_j . c'_t,i <= mu_i cos(pi / k) c'_n,i, j = 1..k   (inscribed k-gon cone)
+              e_j . c'_t,i + rho_i |c'_tau,i| <= mu_i cos(pi / k) c'_n,i,  j = 1..k
               box_low <= p' <= box_high                          object position [m], world
               tilt_low <= r_x', r_y' <= tilt_high                object tilt [rad]
               a~_j = a_j  for every servo j in the kinematic chain of an unshielded contact
@@ -17,11 +17,17 @@ force-closure subset of the contacts stable and the object inside its box::
 
 The friction constraint's right-hand side is ``mu c_n`` (the thesis prints ``mu t_normal``)
 and the polygon with ``k`` edges inscribed in the circle of radius ``mu c_n`` has the apothem
-``mu cos(pi / k) c_n``. The tilt angles are the thesis' (eq. rot_constr): with ``z`` the
-object's z axis in world coordinates, ``r_x = atan2(z_y, z_z)`` and ``r_y = atan2(-z_x,
-z_z)`` (the signed angle between the projection of ``z`` onto the world yz (xz) plane and
-world +Z), linearised in the object's rotation. A box or tilt bound the object already
-violates is relaxed to its current value (the shield then forbids moving further out).
+``mu cos(pi / k) c_n``. The four-finger env's contacts also have torsional friction
+(``condim`` 4: MuJoCo's elliptic cone is ``|c_t / mu|^2 + (c_tau / mu_tau)^2 <= c_n^2``);
+with ``rho = cos(pi / k) mu / mu_tau`` the constraint above (2k rows, one per sign of
+``c_tau``) is a polyhedral cone inscribed in that cone: it gives ``|c_t| <= mu c_n - |s|``
+with ``s = mu c_tau / mu_tau``, and ``sqrt(|c_t|^2 + s^2) <= |c_t| + |s|``. Without
+torsional friction (``rho = 0``) it is the thesis' cone. The tilt angles are the thesis'
+(eq. rot_constr): with ``z`` the object's z axis in world coordinates, ``r_x = atan2(z_y,
+z_z)`` and ``r_y = atan2(-z_x, z_z)`` (the signed angle between the projection of ``z`` onto
+the world yz (xz) plane and world +Z), linearised in the object's rotation. A box or tilt
+bound the object already violates is relaxed to its current value (the shield then forbids
+moving further out).
 
 Contact subsets (thesis' enumeration): the contacts of one hand link are shielded or not
 together (a link is the unit the observation reports). Every set of at least two touching
@@ -146,8 +152,9 @@ class ShieldProblem:
 
     lin : the linearised grasp; groups : contact indices of each touching hand link;
     links : their names; chains : (n_groups, l) servos in each link's kinematic chain;
-    A_contact (m, 1 + k, l), low_contact (m, 1 + k): rows of each contact (normal force,
-    then the k friction edges; upper bound +inf); A_global (5, l), low_global, high_global:
+    A_contact (m, 1 + 2k, l), low_contact (m, 1 + 2k): rows of each contact (normal force,
+    then the k friction edges with ``-rho c_tau``, then with ``+rho c_tau``; upper bound
+    +inf); A_global (5, l), low_global, high_global:
     object position (3) and tilt (2) rows; x_low, x_high: action bounds (l,);
     W_groups : per link, the primitive wrenches of its contacts' friction pyramids (torques
     divided by the grasp's largest contact distance from the object origin).
@@ -332,18 +339,30 @@ class GraspQP:
             if self.model.body_weldid[b] != 0:  # hand links only; palm/floor are fixed
                 groups.setdefault(b, []).append(i)
         bodies = list(groups)
-        m = lin.m
-        E = lin.E.reshape(m, 3, self.l) * s
+        m, nc = lin.m, lin.nc
+        E = lin.E.reshape(m, nc, self.l) * s
         c = lin.forces
-        A_c = np.empty((m, 1 + k, self.l))
-        low_c = np.empty((m, 1 + k))
+        # rows per contact: the normal force, then for each pyramid edge j and sign +-:
+        # mu' (c_n + E_n dq) - e_j . (c_t + E_t dq) -+ rho (c_tau + E_tau dq) >= 0
+        # with mu' = mu cos(pi / k), rho = cos(pi / k) mu / mu_tau (0 without torsion)
+        A_c = np.empty((m, 1 + 2 * k, self.l))
+        low_c = np.empty((m, 1 + 2 * k))
         A_c[:, 0] = E[:, 0]
         low_c[:, 0] = lim.c_min - c[:, 0]
         mu_a = (lin.mu * self.apothem)[:, None]
-        # mu' (c_n + E_n dq) - e_j . (c_t + E_t dq) >= 0
-        A_c[:, 1:] = mu_a[:, :, None] * E[:, None, 0]
-        A_c[:, 1:] -= np.einsum("jt,mtl->mjl", self.dirs, E[:, 1:])
-        low_c[:, 1:] = -(mu_a * c[:, :1] - c[:, 1:] @ self.dirs.T)
+        fric = mu_a[:, :, None] * E[:, None, 0] - np.einsum("jt,mtl->mjl", self.dirs, E[:, 1:3])
+        fric_low = -(mu_a * c[:, :1] - c[:, 1:3] @ self.dirs.T)
+        if nc == 4:
+            tors = lin.mu_torsion > 0
+            rho = np.where(tors, self.apothem * lin.mu / np.where(tors, lin.mu_torsion, 1.0), 0)
+            t_row = (rho[:, None] * E[:, 3])[:, None, :]
+            t_low = (rho * c[:, 3])[:, None]
+        else:
+            t_row, t_low = np.zeros((m, 1, self.l)), np.zeros((m, 1))
+        A_c[:, 1 : 1 + k] = fric - t_row
+        A_c[:, 1 + k :] = fric + t_row
+        low_c[:, 1 : 1 + k] = fric_low + t_low
+        low_c[:, 1 + k :] = fric_low - t_low
         p = lin.object_pos
         r, dr = tilt_angles(lin.object_mat)
         A_g = np.concatenate([lin.F[:3], dr @ lin.F[3:]]) * s
@@ -358,7 +377,7 @@ class GraspQP:
         e = np.empty((m, k, 3))
         e[:, :, 0] = 1.0
         e[:, :, 1:] = lin.mu[:, None, None] * self.dirs[None]
-        Gm = lin.G.reshape(6, m, 3).transpose(1, 0, 2)  # (m, 6, 3)
+        Gm = lin.G.reshape(6, m, nc)[:, :, :3].transpose(1, 0, 2)  # (m, 6, 3): forces
         W = np.einsum("mwc,mkc->mkw", Gm, e)
         W[:, :, 3:] /= L
         prob = ShieldProblem(

@@ -39,9 +39,10 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from shields.grasp import GraspQP, ShieldLimits, ShieldResult
 from shields.islands import simple_shield, smart_shield
 
-__all__ = ["SimpleShield", "SmartShield"]
+__all__ = ["GraspShield", "SimpleShield", "SmartShield"]
 
 
 class _ShieldWrapper(gym.Wrapper):
@@ -75,12 +76,18 @@ class _ShieldWrapper(gym.Wrapper):
         agent_action = np.array(action, dtype=np.float64)
         clipped = np.minimum(np.maximum(agent_action, self._low), self._high)  # np.clip, faster
         executed, intervened = self.shield(clipped)
+        extra = self.shield_info()
         obs, reward, terminated, truncated, info = self.env.step(executed)
         info = dict(info)
         info["agent_action"] = agent_action
         info["executed_action"] = np.array(executed, dtype=np.float64)
         info["shield_intervened"] = bool(intervened)
+        info.update(extra)
         return obs, reward, terminated, truncated, info
+
+    def shield_info(self) -> dict[str, Any]:
+        """Extra ``info`` entries of the last :meth:`shield` call (none by default)."""
+        return {}
 
 
 class SimpleShield(_ShieldWrapper):
@@ -124,3 +131,68 @@ class SmartShield(_ShieldWrapper):
         return smart_shield(
             u.state, action, u.safe_pieces, float(u.action_scale), self._low, self._high
         )
+
+
+class GraspShield(_ShieldWrapper):
+    """The linearised-compliance QP shield (:class:`shields.grasp.GraspQP`) around the
+    four-finger env (``ihm/FourFingerRotate-v0`` or any env whose ``unwrapped`` exposes
+    ``model``, ``data``, ``max_setpoint_step`` [rad] and ``dt`` [s]).
+
+    Each step the clipped agent action goes through the QP at the env's current state; the
+    inner env executes the result. Besides the common keys (module docstring) ``info``
+    carries
+
+    - ``shield_correction``: ``||a~ - clip(a)||``,
+    - ``shield_subset``: the shielded links (tuple of MJCF body names),
+    - ``shield_status``: ``"safe"``, ``"corrected"``, ``"fallback"`` or ``"no_closure"``
+      (:mod:`shields.grasp`),
+    - ``shield_solve_time_s``: the shield's wall time for this step [s].
+
+    ``shield_intervened`` is True for ``"corrected"`` and ``"fallback"``. The shield never
+    raises inside ``step`` for an infeasible situation (it takes the fallback); a NaN action
+    raises the env's error as without the shield.
+
+    Parameters
+    ----------
+    env : the env.
+    backend : QP backend, ``"daqp"`` (default, faster) or ``"osqp"``.
+    limits : :class:`shields.grasp.ShieldLimits` (``c_min``, friction pyramid edges, object
+        box and tilt).
+    """
+
+    _required = ("model", "data", "max_setpoint_step", "dt")
+
+    def __init__(
+        self, env: gym.Env, backend: str = "daqp", limits: ShieldLimits | None = None
+    ) -> None:
+        super().__init__(env)
+        u = env.unwrapped
+        self.qp = GraspQP(
+            u.model,
+            max_setpoint_step=float(u.max_setpoint_step),
+            horizon=float(u.dt),
+            limits=limits,
+            backend=backend,
+        )
+        self.last_result: ShieldResult | None = None
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """``(a~, intervened)`` from :class:`shields.grasp.GraspQP` at the current state."""
+        if not np.all(np.isfinite(action)):
+            return np.asarray(action, dtype=np.float64), False  # the env raises its error
+        res = self.qp(self.env.unwrapped.data, action)
+        self.last_result = res
+        return res.action, res.status in ("corrected", "fallback")
+
+    def shield_info(self) -> dict[str, Any]:
+        """``shield_correction``, ``shield_subset``, ``shield_status``,
+        ``shield_solve_time_s`` of the last step."""
+        r = self.last_result
+        if r is None:
+            return {}
+        return {
+            "shield_correction": r.correction,
+            "shield_subset": r.links,
+            "shield_status": r.status,
+            "shield_solve_time_s": r.solve_time_s,
+        }

@@ -45,6 +45,8 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import OBJECTS, grasp_cache
+from shields import GraspShield
+from shields.grasp import BACKENDS
 from train.pipeline import PipelinedPPO
 from train.ppo import (
     build_parser,
@@ -83,6 +85,13 @@ class RotateConfig:
     torsional: bool = opt(
         True, "torsional friction at the contacts (condim 4; off: point contacts, exploitable)"
     )
+    shield: str = opt(
+        "none",
+        "shield around every env, kept for evaluation: none, or qp (shields.GraspShield, the "
+        "linearised-compliance QP shield)",
+        choices=("none", "qp"),
+    )
+    shield_backend: str = opt("daqp", "QP backend of --shield qp", choices=BACKENDS)
     total_steps: int = opt(
         400_000, "env steps to train (with --resume: steps to add); 1600000 for the long run"
     )
@@ -144,7 +153,8 @@ def make_env(
     max_steps: int | None = None,
 ) -> Callable[[], gym.Env]:
     """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
-    ``cfg.episode_steps``) -> Monitor when ``monitor_file`` is given; seeded with ``seeds``."""
+    ``cfg.episode_steps``) -> :class:`shields.GraspShield` with ``--shield qp`` -> Monitor
+    when ``monitor_file`` is given; seeded with ``seeds``."""
 
     def thunk() -> gym.Env:
         env = gym.make(
@@ -155,6 +165,8 @@ def make_env(
             drop_weight=cfg.drop_weight,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
+        if cfg.shield == "qp":
+            env = GraspShield(env, backend=cfg.shield_backend)
         if monitor_file is not None:
             env = Monitor(
                 env, filename=monitor_file, info_keywords=("dropped",), override_existing=not append
@@ -378,7 +390,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume), evaluate, save; returns the final evaluation."""
     cfg = parse_config(argv)
     torch.set_num_threads(cfg.threads)
-    name = f"FourFingerRotate-{cfg.object}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+    shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
+    name = f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
     keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
     cfg, run_dir = open_run(cfg, name, keep=keep)
     grasp_cache(cfg.object, cfg.gravity)  # build the start-state cache once, before any worker
