@@ -510,7 +510,7 @@ class GraspQP:
             fixed = prob.fixed(mask)
             low[:n][fixed] = high[:n][fixed] = a_eff[fixed]
             solver.update(l=low, u=high)
-            res = solver.solve()
+            res = solver.solve(raise_error=False)
             if res.info.status_val not in (1, 2):  # solved, solved inaccurate
                 yield mask, None
                 continue
