@@ -161,6 +161,26 @@ def test_log_scene_writes_rrd(toy, tmp_path: Path) -> None:
         assert entity in raw
 
 
+def test_log_scene_reads_back_static(toy, tmp_path: Path) -> None:
+    """The settled grasp through the rollouts' recorder: everything static, the geoms at
+    MuJoCo's poses, one arrow per grasp contact of length force_scale x the force."""
+    from rerun.chunk import RrdReader
+
+    model, data, grasp = toy
+    path = log_scene(model, data, grasp, tmp_path / "toy.rrd", force_scale=0.01)
+    cols: dict[str, dict] = {}
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        assert "step" not in batch.schema.names and "sim_time" not in batch.schema.names
+        entity = batch.schema.metadata[b"rerun:entity_path"].decode()
+        cols.setdefault(entity, {}).update(batch.to_pydict())
+    arrows = np.array(cols["/world/contacts/forces"]["Arrows3D:vectors"][0])
+    np.testing.assert_allclose(arrows, 0.01 * grasp.forces_world(), atol=1e-6)
+    g = model.geom("lpad").id
+    pos = cols["/world/geoms/left/lpad"]["Transform3D:translation"][0][0]
+    np.testing.assert_allclose(pos, data.geom_xpos[g], atol=1e-6)
+
+
 def test_main_show_in_process(toy_dir: Path, tmp_path: Path, monkeypatch, capsys) -> None:
     monkeypatch.setattr(scenes, "SCENES_DIR", toy_dir)
     out = tmp_path / "toy.png"
