@@ -401,6 +401,28 @@ def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
 
 
+def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
+    """``python -m train.ppo --shield qp``: the envs (training and evaluation) run inside
+    ``shields.GraspShield``; the run records it."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    tiny = [
+        "--shield", "qp", "--total-steps", "128", "--n-envs", "2", "--n-steps", "64",
+        "--batch-size", "64", "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32",
+        "--eval-episodes", "2", "--eval-seconds", "1", "--workers", "0", "--no-progress",
+    ]  # fmt: skip
+    p = subprocess.run(
+        [sys.executable, "-m", "train.ppo", *tiny, "--out", str(tmp_path)],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    (run_dir,) = list(tmp_path.iterdir())
+    assert "__qp__" in run_dir.name
+    cfg = json.loads((run_dir / "config.json").read_text())
+    assert cfg["shield"] == "qp" and cfg["shield_backend"] == "daqp"
+    res = json.loads((run_dir / "eval.json").read_text())
+    assert res["num_timesteps"] == 128 and 0.0 <= res["intervention_rate"] <= 1.0
+
+
 def test_gait_period_of_a_periodic_signal() -> None:
     from train.gait import gait_period
 

@@ -197,6 +197,8 @@ def evaluate_rotation(
 
     Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes, all queried in one batch.
     Speed of an episode = ``info["rotation_angle"] / (steps * dt)``; a drop ends it.
+    ``intervention_rate``: the fraction of steps in which a shield changed the action
+    (``info["shield_intervened"]``; 0 without a shield).
     """
     k = len(eval_envs)
     targets = [(n_episodes + i) // k for i in range(k)] if k else []
@@ -205,6 +207,7 @@ def evaluate_rotation(
     drops: list[bool] = []
     obs: list[Any] = [None] * k
     steps = [0] * k
+    n_steps = n_shielded = 0
     for i in range(k):
         if targets[i] > 0:
             obs[i], _ = eval_envs[i].reset()
@@ -219,6 +222,8 @@ def evaluate_rotation(
         for j, i in enumerate(active):
             obs[i], _, term, trunc, info = eval_envs[i].step(actions[j])
             steps[i] += 1
+            n_steps += 1
+            n_shielded += bool(info.get("shield_intervened", False))
             if term or trunc:
                 dt = eval_envs[i].unwrapped.dt
                 speeds.append(float(info["rotation_angle"]) / (steps[i] * dt))
@@ -232,6 +237,7 @@ def evaluate_rotation(
         "speed_rad_s": float(np.mean(speeds)) if speeds else float("nan"),
         "speed_median_rad_s": float(np.median(speeds)) if speeds else float("nan"),
         "drop_rate": float(np.mean(drops)) if drops else float("nan"),
+        "intervention_rate": n_shielded / n_steps if n_steps else float("nan"),
     }
 
 
