@@ -1,0 +1,143 @@
+"""Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PNG``.
+
+Groups run directories of :mod:`train.rotate` (``python -m train.ppo``) by their shield
+(``config.json``: ``none`` or ``qp``) and charts, over env steps, the training episode
+return (64-step episodes, each run's moving mean over ``--window`` episodes, binned
+to a common step grid) and the periodic evaluations (deterministic policy, 20 s episodes:
+rotation speed [rad/s] and drop rate), one thin line per run and the group mean thick.
+Writes ``<out>.png`` and ``<out>.csv`` (one row per run: final evaluation, mean return
+over the last 10 % of its training episodes) and prints the table.
+
+    python -m train.compare runs/shield_effect/* --out docs/bench/shield_training
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from train.rotate import _monitor_returns
+
+__all__ = ["load_run", "main", "summarise"]
+
+
+def load_run(run_dir: Path) -> dict:
+    """One run: its shield, seed, training returns (steps, return) and evaluation rows."""
+    cfg_file = run_dir / "config.json"
+    if not cfg_file.is_file():
+        raise SystemExit(f"{run_dir}: not a training run directory (no config.json)")
+    cfg = json.loads(cfg_file.read_text())
+    steps, ret = _monitor_returns(run_dir)
+    evals: list[dict[str, float]] = []
+    ev = run_dir / "eval.csv"
+    if ev.is_file():
+        with ev.open() as f:
+            evals = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    return {
+        "dir": run_dir,
+        "shield": cfg.get("shield", "none"),
+        "seed": int(cfg.get("seed", -1)),
+        "steps": steps,
+        "ret": ret,
+        "evals": evals,
+    }
+
+
+def summarise(run: dict) -> dict[str, float | str | int]:
+    """Final evaluation and the mean training return over the last 10 % of episodes."""
+    ret = run["ret"]
+    tail = ret[-max(1, len(ret) // 10) :] if len(ret) else np.zeros(0)
+    last = run["evals"][-1] if run["evals"] else {}
+    return {
+        "run": run["dir"].name,
+        "shield": run["shield"],
+        "seed": run["seed"],
+        "env_steps": int(run["steps"][-1]) if len(run["steps"]) else 0,
+        "final_return": round(float(tail.mean()), 4) if len(tail) else float("nan"),
+        "eval_steps": int(last.get("steps", 0)),
+        "eval_speed_rad_s": last.get("speed_rad_s", float("nan")),
+        "eval_drop_rate": last.get("drop_rate", float("nan")),
+    }
+
+
+def _plot(runs: list[dict], out: Path, window: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = sorted({r["shield"] for r in runs})
+    colors = {g: f"C{i}" for i, g in enumerate(groups)}
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    top = max((r["steps"][-1] for r in runs if len(r["steps"])), default=1)
+    grid = np.linspace(0, top, 60)
+    for g in groups:
+        curves = []
+        for r in (r for r in runs if r["shield"] == g):
+            if len(r["ret"]) < window:
+                continue
+            sm = np.convolve(r["ret"], np.ones(window) / window, mode="valid")
+            x = r["steps"][window - 1 :]
+            ax[0].plot(x, sm, color=colors[g], lw=0.6, alpha=0.5)
+            curves.append(np.interp(grid, x, sm, left=np.nan, right=np.nan))
+        if curves:
+            ax[0].plot(grid, np.nanmean(curves, axis=0), color=colors[g], lw=2.2,
+                       label=f"shield {g} ({len(curves)} seeds)")  # fmt: skip
+        for key, a in (("speed_rad_s", ax[1]), ("drop_rate", ax[2])):
+            rows = [r["evals"] for r in runs if r["shield"] == g and r["evals"]]
+            for ev in rows:
+                a.plot([e["steps"] for e in ev], [e[key] for e in ev], "o-", ms=3,
+                       color=colors[g], lw=0.6, alpha=0.5)  # fmt: skip
+            n = min((len(ev) for ev in rows), default=0)
+            if n:
+                xs = np.mean([[e["steps"] for e in ev[:n]] for ev in rows], axis=0)
+                ys = np.mean([[e[key] for e in ev[:n]] for ev in rows], axis=0)
+                a.plot(xs, ys, "o-", color=colors[g], lw=2.2, label=f"shield {g}, mean")
+    ax[0].set_title(f"training episode return (moving mean of {window})")
+    ax[0].set_ylabel("return [rad/s summed over 64 steps]")
+    ax[1].set_title("evaluation: rotation speed [rad/s]")
+    ax[2].set_title("evaluation: drop rate")
+    for a in ax:
+        a.set_xlabel("env steps")
+        a.grid(alpha=0.3)
+        a.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: Sequence[str] | None = None) -> list[dict]:
+    """Parse, load, chart, write the CSV; returns the summary rows."""
+    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("runs", nargs="+", type=Path, help="run directories")
+    p.add_argument("--out", type=Path, required=True, help="output path without suffix")
+    p.add_argument("--window", type=int, default=100, help="episodes in the moving mean")
+    args = p.parse_args(argv)
+    if args.window < 1:
+        p.error("--window must be >= 1")
+    runs = [load_run(d) for d in args.runs if d.is_dir()]
+    if not runs:
+        p.error("no run directories given")
+    rows = [summarise(r) for r in runs]
+    rows.sort(key=lambda r: (r["shield"], r["seed"]))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    with args.out.with_suffix(".csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    _plot(runs, args.out.with_suffix(".png"), args.window)
+    cols = list(rows[0])
+    print(" | ".join(cols))
+    for r in rows:
+        print(" | ".join(str(r[c]) for c in cols))
+    return rows
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
