@@ -17,6 +17,7 @@ import argparse
 import csv
 import json
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -87,7 +88,10 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
             ax[0].plot(x, sm, color=colors[g], lw=0.6, alpha=0.5)
             curves.append(np.interp(grid, x, sm, left=np.nan, right=np.nan))
         if curves:
-            ax[0].plot(grid, np.nanmean(curves, axis=0), color=colors[g], lw=2.2,
+            with warnings.catch_warnings():  # grid points past a shorter run: all NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean = np.nanmean(curves, axis=0)
+            ax[0].plot(grid, mean, color=colors[g], lw=2.2,
                        label=f"shield {g} ({len(curves)} seeds)")  # fmt: skip
         for key, a in (("speed_rad_s", ax[1]), ("drop_rate", ax[2])):
             rows = [r["evals"] for r in runs if r["shield"] == g and r["evals"]]
