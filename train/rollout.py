@@ -52,6 +52,8 @@ import rerun.blueprint as rrb
 
 from ihm.hands.four_finger import ACTUATOR_NAMES, NU
 from ihm.rerun_log import SceneRecorder
+from shields import GraspShield
+from shields.grasp import BACKENDS
 from train.gait import SHIPPED, load_policy
 from train.ppo import build_parser, opt
 from train.rotate import RotateConfig, make_env
@@ -85,7 +87,9 @@ class RolloutConfig:
         "none: the bare env; qp: wrapped in shields.GraspShield; both: one run of each",
         choices=SHIELDS,
     )
-    backend: str = opt("daqp", "QP backend of the grasp shield (GraspShield(backend=...))")
+    backend: str = opt(
+        "daqp", "QP backend of the grasp shield (GraspShield(backend=...))", choices=BACKENDS
+    )
     force_scale: float = opt(0.02, "force arrow length per newton [m/N]")
     out: str = opt("runs/rollouts", "directory that receives the .rrd files")
     threads: int = opt(1, "torch threads for the policy's forward pass")
@@ -102,16 +106,9 @@ def _policy_problems(path: Path) -> list[str]:
     return []
 
 
-def _grasp_shield() -> type[gym.Wrapper]:
-    """``shields.GraspShield``, imported on demand (ImportError if this checkout lacks it)."""
-    from shields import GraspShield
-
-    return GraspShield
-
-
 def parse_config(argv: Sequence[str] | None = None) -> RolloutConfig:
-    """Parse the command line into a :class:`RolloutConfig`; bad options (and a shield that
-    cannot be imported) exit with status 2 and a message naming the option."""
+    """Parse the command line into a :class:`RolloutConfig`; bad options exit with status 2
+    and a message naming the option."""
     parser = build_parser(
         RolloutConfig, prog="python -m train.rollout", description=(__doc__ or "").split("\n\n")[0]
     )
@@ -127,14 +124,6 @@ def parse_config(argv: Sequence[str] | None = None) -> RolloutConfig:
         problems.append("--random and --policy exclude each other")
     if not cfg.random:
         problems += _policy_problems(Path(cfg.policy) if cfg.policy else SHIPPED)
-    if cfg.shield != "none":
-        try:
-            _grasp_shield()
-        except ImportError as exc:
-            problems.append(
-                f"--shield {cfg.shield} needs shields.GraspShield, the QP grasp shield, which "
-                f"cannot be imported here ({exc}); use --shield none"
-            )
     if problems:
         parser.error("; ".join(problems))
     return cfg
@@ -243,7 +232,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     envs: dict[str, gym.Env] = {}
     for s in settings:
         env = make_env(env_cfg, max_steps=cfg.steps)()
-        envs[s] = _grasp_shield()(env, backend=cfg.backend) if s == "qp" else env
+        envs[s] = GraspShield(env, backend=cfg.backend) if s == "qp" else env
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(cfg.out)
     results = []
