@@ -82,6 +82,11 @@ from numpy.typing import NDArray
 __all__ = ["GraspLinearization", "ShieldError", "linearize"]
 
 
+_SKEW_AT = [1, 2, 3, 5, 6, 7]
+_SKEW_FROM = [2, 1, 2, 0, 1, 0]
+_SKEW_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
 class ShieldError(ValueError):
     """Bad input to the grasp shield or its model (unsupported model, bad option, no object)."""
 
@@ -188,6 +193,8 @@ class _HandInfo:
         self.dofs = np.array(dofs, dtype=np.int64)
         self.C_joint = 1.0 / np.array(kp)
         self.names = [model.body(b).name for b in range(model.nbody)]
+        self.geom_body = model.geom_bodyid.tolist()
+        self.static = (model.body_weldid == 0).tolist()
 
 
 _INFO: dict[tuple[int, str], _HandInfo] = {}
@@ -241,25 +248,26 @@ def linearize(
     if not horizon > 0 or not np.isfinite(horizon):
         raise ShieldError(f"horizon must be a finite number > 0 [s], got {horizon!r}")
     info = _info(model, object_body)
-    in_obj, obj = info.in_obj, info.obj
+    in_obj, obj, geom_body = info.in_obj, info.obj, info.geom_body
     n_servo = len(info.dofs)
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
-    ids, bodies, sign = [], [], []
-    geom_body = model.geom_bodyid
+    ids, bodies, sign, dims = [], [], [], []
     con = data.contact
     if data.ncon:
-        geom, adr, excl = con.geom.tolist(), con.efc_address.tolist(), con.exclude.tolist()
+        geom, adr = con.geom.tolist(), con.efc_address.tolist()
+        excl, dim = con.exclude.tolist(), con.dim.tolist()
         for i, (g1, g2) in enumerate(geom):
             if adr[i] < 0 or excl[i]:
                 continue
-            b1, b2 = int(geom_body[g1]), int(geom_body[g2])
-            o1, o2 = in_obj[b1], in_obj[b2]
-            if o1 == o2:
+            b1, b2 = geom_body[g1], geom_body[g2]
+            o1 = in_obj[b1]
+            if o1 == in_obj[b2]:
                 continue
             ids.append(i)
             bodies.append(b2 if o1 else b1)
             sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
+            dims.append(dim[i])
     m = len(ids)
     if m == 0:
         z = np.zeros
@@ -268,75 +276,82 @@ def linearize(
             z((0, 3)), z(0), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(),
             z((0, 0)), z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
         )  # fmt: skip
-    idx = np.array(ids)
-    dims = con.dim[idx]
-    if np.any(dims < 3) or np.any(dims > 4):
+    if min(dims) < 3 or max(dims) > 4:
         raise ShieldError(
             "object contacts must have condim 3 (point contact with friction) or 4 (with "
-            f"torsional friction); got {sorted(set(dims.tolist()))}"
+            f"torsional friction); got {sorted(set(dims))}"
         )
-    nc = 4 if np.any(dims == 4) else 3
+    nc = max(dims)
+    idx = np.array(ids)
     s = np.array(sign)
-    frames = con.frame[idx].reshape(m, 3, 3).copy()
-    frames[:, 0] *= s[:, None]
-    frames[:, 1] *= s[:, None]
+    frames = con.frame[idx].reshape(m, 3, 3)
+    frames[:, :2] *= s[:, None, None]
     a = con.efc_address[idx]
     ef = data.efc_force
     # elliptic cone: the rows a, a+1, a+2 (a+3) are the force (and moment about the normal)
     # on geom2 in MuJoCo's frame; in the frame flipped when the object is geom1, the force of
     # the hand on the object has the same (n, t1) numbers and the opposite t2, and the moment
     # about the (flipped) normal is the same number
-    forces = np.stack([ef[a], ef[a + 1], ef[a + 2] * s], axis=1)
-    points = con.pos[idx].copy()
-    fr = con.friction[idx]
-    mu = fr[:, 0].copy()
-    kbip, R = data.efc_KBIP, data.efc_R
-    c_n = R[a] / (kbip[a, 0] * kbip[a, 2])
-    c_t = R[a + 1] * horizon / kbip[a + 1, 1]
-    comp = [c_n, c_t, c_t]
+    rows = a[:, None] + np.arange(nc)
+    tors = np.array(dims) == 4
     if nc == 4:
-        tors = dims == 4
-        a3 = np.where(tors, a + 3, a)
-        forces = np.concatenate([forces, np.where(tors, ef[a3], 0.0)[:, None]], axis=1)
-        # a condim-3 contact has no torsional friction: a (practically) free twist
-        comp.append(np.where(tors, R[a3] * horizon / kbip[a3, 1], 1e9))
-    C_contact = np.stack(comp, axis=1).reshape(-1)
+        rows[~tors, 3] = a[~tors]  # condim 3 in a condim-4 grasp: no torsional row
+    forces = ef[rows]
+    forces[:, 2] *= s
+    points = con.pos[idx]
+    fr = con.friction[idx]
+    mu = fr[:, 0]
+    kbip, R = data.efc_KBIP[rows], data.efc_R[rows]
+    # normal: R_n / (K_s I); tangential and torsional: R h / B
+    comp = R * horizon / kbip[:, :, 1]
+    comp[:, 0] = R[:, 0] / (kbip[:, 0, 0] * kbip[:, 0, 2])
+    if nc == 4 and not tors.all():
+        forces[~tors, 3] = 0.0
+        comp[~tors, 3] = 1e9  # a condim-3 contact has no torsional friction: a free twist
+    C_contact = comp.reshape(-1)
     # grasp map, world axes: f = frame^T c, torque = (p - x_o) x f = [r]_x frame^T c, and the
     # torsional moment c_tau about n
     Ft = frames.transpose(0, 2, 1)  # (m, 3, 3): columns n, t1, t2 in world
     r = points - x_o
-    rx = np.zeros((m, 3, 3))
-    rx[:, 0, 1], rx[:, 0, 2], rx[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
-    rx[:, 1, 0], rx[:, 2, 0], rx[:, 2, 1] = r[:, 2], -r[:, 1], r[:, 0]
     Gc = np.zeros((m, 6, nc))
     Gc[:, :3, :3] = Ft
-    Gc[:, 3:, :3] = rx @ Ft
+    rx = np.zeros((m, 9))  # [r]_x, row-major: [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+    rx[:, _SKEW_AT] = r[:, _SKEW_FROM] * _SKEW_SIGN
+    Gc[:, 3:, :3] = rx.reshape(m, 3, 3) @ Ft
     if nc == 4:
         Gc[:, 3:, 3] = frames[:, 0]
     G = Gc.transpose(1, 0, 2).reshape(6, nc * m)
     J = np.zeros((nc * m, n_servo))
-    jacp = np.zeros((3, model.nv))
-    jacr = np.zeros((3, model.nv)) if nc == 4 else None
+    jac = np.zeros((6, model.nv))
+    jacp, jacr = jac[:3], jac[3:]
+    dofs = info.dofs
     for k in range(m):
         b = bodies[k]
-        if model.body_weldid[b] == 0:
+        if info.static[b]:
             continue  # static body: no motion
-        mujoco.mj_jac(model, data, jacp, jacr, points[k], b)
-        J[nc * k : nc * k + 3] = frames[k] @ jacp[:, info.dofs]
-        if jacr is not None:
-            J[nc * k + 3] = frames[k, 0] @ jacr[:, info.dofs]
+        mujoco.mj_jac(model, data, jacp, jacr if nc == 4 else None, points[k], b)
+        jk = jac[:, dofs]
+        J[nc * k : nc * k + 3] = frames[k] @ jk[:3]
+        if nc == 4:
+            J[nc * k + 3] = frames[k, 0] @ jk[3:]
     C = (J * info.C_joint) @ J.T
-    C[np.diag_indices_from(C)] += C_contact
+    C.flat[:: nc * m + 1] += C_contact
     K = np.linalg.inv(C)
-    K = 0.5 * (K + K.T)
     GK = G @ K
     GKGt = GK @ G.T
-    # pseudo-inverse of the symmetric PSD 6 x 6 matrix through its eigen-decomposition
-    lam, V = np.linalg.eigh(GKGt)
-    keep = lam > 1e-10 * max(float(lam[-1]), 1e-300)
-    Vk = V[:, keep]
-    F = (Vk / lam[keep]) @ (Vk.T @ (GK @ J))
-    E = K @ (J - G.T @ F)
+    GKJ = GK @ J
+    try:  # positive definite (the contacts hold every object direction): Cholesky
+        L = np.linalg.cholesky(GKGt)
+        d = np.diagonal(L)
+        if d.min() < 1e-5 * d.max():
+            raise np.linalg.LinAlgError
+        F = np.linalg.solve(GKGt, GKJ)
+    except np.linalg.LinAlgError:  # a direction no contact holds: pseudo-inverse
+        lam, V = np.linalg.eigh(GKGt)
+        keep = lam > 1e-10 * max(float(lam[-1]), 1e-300)
+        Vk = V[:, keep]
+        F = (Vk / lam[keep]) @ (Vk.T @ GKJ)
+    E = K @ J - K @ (G.T @ F)
     return GraspLinearization(
         contact_ids=idx.astype(np.int64),
         bodies=np.array(bodies, dtype=np.int64),
@@ -345,7 +360,7 @@ def linearize(
         frames=frames,
         forces=forces,
         mu=mu,
-        mu_torsion=fr[:, 2].copy() if nc == 4 else np.zeros(m),
+        mu_torsion=np.where(tors, fr[:, 2], 0.0) if nc == 4 else np.zeros(m),
         G=G,
         J=J,
         C_contact=C_contact,

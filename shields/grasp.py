@@ -32,10 +32,12 @@ moving further out).
 Contact subsets (thesis' enumeration): the contacts of one hand link are shielded or not
 together (a link is the unit the observation reports). Every set of at least two touching
 links whose contacts are in force closure is a candidate (tested on the inscribed friction
-pyramids' primitive wrenches, the Ferrari-Canny construction of :mod:`stability.gws`; a
-superset of a force-closure set is one too, so only minimal sets are tested). The servos of
-the unshielded links' kinematic chains keep the agent's action. The candidate with the
-smallest ``||a~ - a||`` wins, ties to the one that shields more contacts.
+pyramids' primitive wrenches, the Ferrari-Canny construction of :mod:`stability.gws`, with
+point contacts: fewer than three contacts are never in force closure). The servos of the
+unshielded links' kinematic chains keep the agent's action. The candidate with the
+smallest ``||a~ - a||`` wins, ties to the one that shields more contacts. For speed, each
+set's QP is solved first and its force closure (one more QP) tested only if its solution
+would win; the answer is the same as testing every set first.
 
 Outcomes (``ShieldResult.status``):
 
@@ -54,9 +56,11 @@ Both results are verified against the linear model before they are used.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import lru_cache
 from itertools import combinations
 from typing import Any
 
@@ -128,9 +132,9 @@ class ShieldResult:
     status : one of :data:`STATUSES`
     links : names of the shielded links (empty for ``"fallback"`` and ``"no_closure"``)
     correction : ``||a~ - a||`` (Euclidean, action units)
-    candidates : force-closure link sets the QPs were solved for (1 when the agent's action
-        is safe: the set it keeps)
-    qps : QPs solved
+    candidates : force-closure link sets found among those tested (1 when the agent's action
+        is safe: the set it keeps); a set is tested only if its QP solution would win
+    qps : QPs solved (one per link set of >= 2 links and >= 3 contacts)
     violation : largest constraint violation of ``a~`` under the linear model, for its
         candidate's constraints (<= 1e-6 for ``"safe"`` and ``"corrected"``) [N, m, rad]
     solve_time_s : wall time of the whole shield call, linearisation included [s]
@@ -174,6 +178,7 @@ class ShieldProblem:
     W_groups: list[NDArray[np.float64]]
     _closure: dict[int, bool] = field(default_factory=dict)
     _candidates: list[int] | None = None
+    _blocks: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
 
     def closure(self, mask: int) -> bool:
         """Force closure of the contacts of the links in ``mask`` (memoised; a superset of a
@@ -191,6 +196,18 @@ class ShieldProblem:
         self._closure[mask] = ok
         return ok
 
+    def link_sets(self) -> list[int]:
+        """Bit masks of the link sets that could be in force closure (>= 2 links, >= 3
+        contacts), the largest first."""
+        n = len(self.groups)
+        sizes = [len(g) for g in self.groups]
+        return [
+            mask
+            for size in range(n, 1, -1)
+            for mask in _masks(n, size)
+            if sum(sizes[g] for g in range(n) if mask >> g & 1) >= 3
+        ]
+
     @property
     def candidates(self) -> list[int]:
         """Bit masks of the link sets (>= 2 links) in force closure, smallest first."""
@@ -204,11 +221,17 @@ class ShieldProblem:
     def rows(self, mask: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray]:
         """``(A, low, high)`` of candidate ``mask``: its shielded contacts' rows, then the
         global rows."""
-        idx = [i for g, members in enumerate(self.groups) if mask >> g & 1 for i in members]
-        k1 = self.A_contact.shape[1]
-        A = np.concatenate([self.A_contact[idx].reshape(-1, self.A_global.shape[1]), self.A_global])
-        low = np.concatenate([self.low_contact[idx].reshape(-1), self.low_global])
-        high = np.concatenate([np.full(len(idx) * k1, np.inf), self.high_global])
+        if self._blocks is None:
+            nl = self.A_global.shape[1]
+            self._blocks = [
+                (self.A_contact[members].reshape(-1, nl), self.low_contact[members].reshape(-1))
+                for members in self.groups
+            ]
+        sel = [self._blocks[g] for g in range(len(self.groups)) if mask >> g & 1]
+        A = np.concatenate([b[0] for b in sel] + [self.A_global])
+        low = np.concatenate([b[1] for b in sel] + [self.low_global])
+        high = np.full(len(low), np.inf)
+        high[len(low) - len(self.high_global) :] = self.high_global
         return A, low, high
 
     def fixed(self, mask: int) -> NDArray[np.bool_]:
@@ -219,28 +242,36 @@ class ShieldProblem:
                 out |= self.chains[g]
         return out
 
-    def violation(self, mask: int, x: NDArray[np.float64]) -> float:
-        """Largest violation of candidate ``mask``'s rows and the action bounds by ``x``."""
-        A, low, high = self.rows(mask)
+    def violation(
+        self,
+        mask: int,
+        x: NDArray[np.float64],
+        rows: tuple[NDArray[np.float64], NDArray[np.float64], NDArray] | None = None,
+    ) -> float:
+        """Largest violation of candidate ``mask``'s rows (``rows``: :meth:`rows` of it, if
+        already built) and the action bounds by ``x``."""
+        A, low, high = self.rows(mask) if rows is None else rows
         y = A @ x
-        v = max(float(np.max(low - y, initial=0.0)), float(np.max(y - high, initial=0.0)))
-        v = max(v, float(np.max(self.x_low - x, initial=0.0)))
-        return max(v, float(np.max(x - self.x_high, initial=0.0)))
+        v = np.concatenate([low - y, y - high, self.x_low - x, x - self.x_high])
+        return max(float(v.max()), 0.0)
 
 
 def tilt_angles(object_mat: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray]:
     """``(r, dr)``: the thesis' tilt angles ``r = (r_x, r_y)`` [rad] of an object with the
     rotation matrix ``object_mat`` (columns: its axes in world), and their gradient (2, 3)
     with respect to a small world rotation vector ``dtheta`` (``r' ~ r + dr dtheta``)."""
-    z = np.asarray(object_mat, dtype=np.float64)[:, 2]
-    zx, zy, zz = z
-    r = np.array([np.arctan2(zy, zz), np.arctan2(-zx, zz)])
-    # dr = g . dz with dz = dtheta x z, so dr/dtheta = z x g
-    n_x, n_y = zy * zy + zz * zz, zx * zx + zz * zz
-    # z x (0, zz, -zy) and z x (-zz, 0, zx), written out
-    d_x = np.array([-zy * zy - zz * zz, zx * zy, zx * zz]) / max(n_x, 1e-300)
-    d_y = np.array([zx * zy, -zx * zx - zz * zz, zy * zz]) / max(n_y, 1e-300)
-    return r, np.stack([d_x, d_y])
+    zx, zy, zz = np.asarray(object_mat, dtype=np.float64)[:, 2].tolist()
+    r = np.array([math.atan2(zy, zz), math.atan2(-zx, zz)])
+    # dr = g . dz with dz = dtheta x z, so dr/dtheta = z x g; with g_x = (0, zz, -zy) / n_x
+    # and g_y = (-zz, 0, zx) / n_y, written out:
+    n_x, n_y = max(zy * zy + zz * zz, 1e-300), max(zx * zx + zz * zz, 1e-300)
+    dr = np.array(
+        [
+            [(-zy * zy - zz * zz) / n_x, zx * zy / n_x, zx * zz / n_x],
+            [zx * zy / n_y, (-zx * zx - zz * zz) / n_y, zy * zz / n_y],
+        ]
+    )
+    return r, dr
 
 
 def _pyramid(edges: int) -> tuple[NDArray[np.float64], float]:
@@ -264,14 +295,18 @@ def force_closure_wrenches(W: NDArray[np.float64]) -> bool:
     if not ev[0] > 1e-12 * max(float(ev[-1]), 1e-300):
         return False
     k = len(W)
-    # min 0.5 |lambda|^2  s.t.  lambda >= 1 (bounds), W^T lambda = 0 (equalities)
-    lo = np.concatenate([np.ones(k), np.zeros(6)])
-    hi = np.concatenate([np.full(k, _INF), np.zeros(6)])
-    sense = np.concatenate([np.zeros(k, np.int32), np.full(6, 5, np.int32)])
-    x, _, flag, _ = daqp.solve(np.eye(k), np.zeros(k), np.ascontiguousarray(W.T), hi, lo, sense)
+    # lambda = 1 + mu: min 0.5 |mu|^2  s.t.  mu >= 0 (bounds), W^T mu = -W^T 1 (equalities).
+    # (The minimiser starts from mu = 0, which satisfies the bounds: a few active-set steps,
+    # where 0.5 |lambda|^2 with lambda >= 1 starts with every bound violated.)
+    lo, hi, sense = _closure_bounds(k)
+    b = -W.sum(axis=0)
+    lo[k:] = b
+    hi[k:] = b
+    mu, _, flag, _ = daqp.solve(_eye(k), np.zeros(k), np.ascontiguousarray(W.T), hi, lo, sense)
     if flag < 1:
         return False
-    return bool(np.abs(W.T @ x).max() <= 1e-7 * max(float(np.abs(x).sum()), 1.0))
+    lam = 1.0 + np.maximum(mu, 0.0)
+    return bool(np.abs(W.T @ lam).max() <= 1e-7 * max(float(lam.sum()), 1.0))
 
 
 class GraspQP:
@@ -350,7 +385,7 @@ class GraspQP:
         A_c[:, 0] = E[:, 0]
         low_c[:, 0] = lim.c_min - c[:, 0]
         mu_a = (lin.mu * self.apothem)[:, None]
-        fric = mu_a[:, :, None] * E[:, None, 0] - np.einsum("jt,mtl->mjl", self.dirs, E[:, 1:3])
+        fric = mu_a[:, :, None] * E[:, None, 0] - self.dirs @ E[:, 1:3]
         fric_low = -(mu_a * c[:, :1] - c[:, 1:3] @ self.dirs.T)
         if nc == 4:
             tors = lin.mu_torsion > 0
@@ -442,52 +477,62 @@ class GraspQP:
                 return done(a.copy(), "safe", ok, 1, 0, prob.violation(ok, a_eff))
         if n < 2 or not prob.closure(full):
             return done(a.copy(), "no_closure", 0, 0, 0, 0.0)
+        # every link set that could be in force closure (>= 2 links, >= 3 contacts), the
+        # largest first; a set's QP is solved first and its force closure tested only if its
+        # solution would win (the closure test costs more than the QP)
+        sets = prob.link_sets()
         solve = self._solve_daqp if self.backend == "daqp" else self._solve_osqp
-        best_x, best_mask, best_obj, best_viol, qps = None, 0, np.inf, 0.0, 0
-        for mask, x in solve(prob, a, a_eff):
+        best_x, best_mask, best_obj, best_viol, qps, cands = None, 0, np.inf, 0.0, 0, 0
+        for mask, x, rows in solve(prob, a, a_eff, sets):
             qps += 1
             if x is None:
                 continue
-            viol = prob.violation(mask, x)
+            viol = prob.violation(mask, x, rows)
             if viol > tol:
                 continue
             obj = float(np.sum((x - a) ** 2))
             better = obj < best_obj - 1e-12 or (
                 obj <= best_obj + 1e-12 and bin(mask).count("1") > bin(best_mask).count("1")
             )
-            if better:
+            if better and prob.closure(mask):
                 best_x, best_mask, best_obj, best_viol = x, mask, obj, viol
+        cands = sum(1 for mask in sets if prob._closure.get(mask, False))
         if best_x is None:
-            return done(np.zeros(self.l), "fallback", 0, len(prob.candidates), qps, 0.0)
-        return done(best_x, "corrected", best_mask, len(prob.candidates), qps, best_viol)
+            return done(np.zeros(self.l), "fallback", 0, cands, qps, 0.0)
+        return done(best_x, "corrected", best_mask, cands, qps, best_viol)
 
-    def _solve_daqp(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray):
-        """One DAQP solve per candidate over its free servos; yields ``(mask, x or None)``."""
-        for mask in prob.candidates:
+    def _solve_daqp(
+        self, prob: ShieldProblem, a: NDArray, a_eff: NDArray, masks: list[int]
+    ) -> _Solves:
+        """One DAQP solve per link set over its free servos (``H = I``); yields ``(mask,
+        x or None, rows)``."""
+        for mask in masks:
             fixed = prob.fixed(mask)
             free = ~fixed
             nf = int(free.sum())
-            A, low, high = prob.rows(mask)
+            rows = prob.rows(mask)
             if nf == 0:
-                yield mask, None
+                yield mask, None, rows
                 continue
+            A, low, high = rows
             shift = A[:, fixed] @ a_eff[fixed]
             bl = np.concatenate([prob.x_low[free], low - shift])
             bu = np.concatenate([prob.x_high[free], np.minimum(high - shift, _INF)])
-            bl = np.maximum(bl, -_INF)
             y, _, flag, _ = daqp.solve(
-                np.eye(nf), -a[free], np.ascontiguousarray(A[:, free]), bu, bl,
-                np.zeros(len(bu), dtype=np.int32),
-            )  # fmt: skip
+                _eye(nf), -a[free], np.ascontiguousarray(A[:, free]), bu, bl, _sense(len(bu))
+            )
             if flag < 1:
-                yield mask, None
+                yield mask, None, rows
                 continue
             x = a_eff.copy()
             x[free] = np.minimum(np.maximum(y, prob.x_low[free]), prob.x_high[free])
-            yield mask, x
+            yield mask, x, rows
 
-    def _solve_osqp(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray):
-        """One OSQP setup (factorisation) per step; per candidate only bounds change."""
+    def _solve_osqp(
+        self, prob: ShieldProblem, a: NDArray, a_eff: NDArray, masks: list[int]
+    ) -> _Solves:
+        """One OSQP setup (factorisation) per step; per candidate only bounds change; yields
+        ``(mask, x or None, rows)``."""
         n = self.l
         m = prob.lin.m
         k1 = prob.A_contact.shape[1]
@@ -501,7 +546,7 @@ class GraspQP:
             verbose=False, eps_abs=1e-8, eps_rel=1e-8, polishing=True, max_iter=4000,
         )  # fmt: skip
         contact_rows = np.arange(n_c).reshape(m, k1) + n
-        for mask in prob.candidates:
+        for mask in masks:
             low, high = low0.copy(), high0.copy()
             for g, members in enumerate(prob.groups):
                 if mask >> g & 1:
@@ -512,11 +557,36 @@ class GraspQP:
             solver.update(l=low, u=high)
             res = solver.solve(raise_error=False)
             if res.info.status_val not in (1, 2):  # solved, solved inaccurate
-                yield mask, None
+                yield mask, None, None
                 continue
             x = np.minimum(np.maximum(res.x, prob.x_low), prob.x_high)
             x[fixed] = a_eff[fixed]
-            yield mask, x
+            yield mask, x, None
+
+
+_Solves = Iterator[tuple[int, NDArray[np.float64] | None, tuple | None]]
+
+
+@lru_cache(maxsize=64)
+def _eye(n: int) -> NDArray[np.float64]:
+    return np.eye(n)
+
+
+@lru_cache(maxsize=256)
+def _sense(n: int) -> NDArray[np.int32]:
+    return np.zeros(n, dtype=np.int32)
+
+
+def _closure_bounds(k: int) -> tuple[NDArray, NDArray, NDArray]:
+    """Bounds ``mu >= 0`` then 6 equality rows (their values set by the caller)."""
+    lo = np.zeros(k + 6)
+    hi = np.concatenate([np.full(k, _INF), np.zeros(6)])
+    return lo, hi, _closure_sense(k)
+
+
+@lru_cache(maxsize=64)
+def _closure_sense(k: int) -> NDArray[np.int32]:
+    return np.concatenate([np.zeros(k, np.int32), np.full(6, 5, np.int32)])
 
 
 def _masks(n: int, size: int) -> Iterator[int]:
