@@ -194,11 +194,7 @@ class ShieldProblem:
             ok = True
         else:
             W = np.concatenate([self.W_groups[g] for g in members])  # (contacts, k, 6)
-            k = W.shape[1]
-            # the pyramid of every other edge is inscribed in the k-edge one: closure with it
-            # implies closure (half the variables, so try it first)
-            ok = k % 2 == 0 and k >= 6 and force_closure_wrenches(W[:, ::2].reshape(-1, 6))
-            ok = ok or force_closure_wrenches(W.reshape(-1, 6))
+            ok = force_closure_wrenches(W.reshape(-1, 6))
         self._closure[mask] = ok
         return ok
 
