@@ -64,8 +64,8 @@ G) K J``). ``^+`` is the pseudo-inverse: an object direction that no contact sti
 holds (two point contacts: the spin about the line through them) gets no motion.
 
 What the linearisation leaves out (its accuracy is measured in tests/test_compliance.py and
-``python -m shields.accuracy``): contacts that roll or slide, contacts that make or break,
-the change of the contact frames with the motion (Cutkosky's geometric stiffness), the
+``python -m shields.bench accuracy``): contacts that roll or slide, contacts that make or
+break, the change of the contact frames with the motion (Cutkosky's geometric stiffness), the
 servo's force limit (a saturated servo does not follow its setpoint), the torsional friction
 of ``condim`` 4 contacts (it adds stiffness about the normal), the dynamics within the step,
 and contacts between fingers. Palm and floor contacts are fixed bodies (zero ``J`` rows).
