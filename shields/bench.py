@@ -126,7 +126,7 @@ from tqdm import tqdm
 from envs.four_finger import CONTACT_LINKS, FourFingerRotate
 from ihm.hands.four_finger import ACTUATOR_NAMES
 from shields.compliance import GraspLinearization, linearize
-from shields.grasp import BACKENDS, STATUSES, GraspQP
+from shields.grasp import BACKENDS, STATUSES, GraspQP, ShieldLimits
 from shields.wrappers import GraspShield
 
 __all__ = [
@@ -920,10 +920,14 @@ def run_effect(
     steps: int = 400,
     agents: Sequence[str] = AGENTS,
     progress: bool = True,
+    relax_contacts: bool = False,
 ) -> list[dict[str, Any]]:
     """The ``effect`` measurement (module docstring): one row per episode, written to
     ``out/shield_effect.csv``; summary ``shield_effect_summary.csv``; chart
-    ``shield_effect.png``. Returns the rows."""
+    ``shield_effect.png`` (``shield_effect_relaxed*`` with ``relax_contacts``: the shield
+    with :attr:`shields.grasp.ShieldLimits.relax_contacts`). Returns the rows."""
+    name = "shield_effect_relaxed" if relax_contacts else "shield_effect"
+    limits = ShieldLimits(relax_contacts=relax_contacts)
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=len(agents) * episodes * 2, desc="effect episodes", disable=not progress)
     for agent in agents:
@@ -931,7 +935,7 @@ def run_effect(
             raise ValueError(f"unknown agent {agent!r}; choose from {AGENTS}")
         act, opts = _policy() if agent == "policy" else (None, {})
         bare = _make_env(opts)
-        shielded = GraspShield(_make_env(opts), backend="daqp")
+        shielded = GraspShield(_make_env(opts), backend="daqp", limits=limits)
         for ep in range(episodes):
             for shield, env in (("none", bare), ("qp", shielded)):
                 row = {"agent": agent, "shield": shield, "episode": ep}
@@ -944,10 +948,10 @@ def run_effect(
         shielded.close()
     bar.close()
     out.mkdir(parents=True, exist_ok=True)
-    _write_csv(out / "shield_effect.csv", rows)
+    _write_csv(out / f"{name}.csv", rows)
     summary = summarize_effect(rows)
-    _write_csv(out / "shield_effect_summary.csv", summary)
-    plot_effect(summary, out / "shield_effect.png")
+    _write_csv(out / f"{name}_summary.csv", summary)
+    plot_effect(summary, out / f"{name}.png")
     return rows
 
 
@@ -1150,6 +1154,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--steps", type=_positive, default=400, help="steps per episode (20 Hz)")
     e.add_argument("--agents", type=_csv_list(str, AGENTS), default=list(AGENTS),
                    help="comma-separated: random,policy")  # fmt: skip
+    e.add_argument(
+        "--relax-contacts",
+        action="store_true",
+        help="the shield with ShieldLimits(relax_contacts=True) (an ablation)",
+    )
     return p
 
 
@@ -1180,11 +1189,12 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     else:
         rows = run_effect(
             out, seed=args.seed, episodes=args.episodes, steps=args.steps,
-            agents=args.agents, progress=progress,
+            agents=args.agents, progress=progress, relax_contacts=args.relax_contacts,
         )  # fmt: skip
         summary = summarize_effect(rows)
         _print_effect(summary)
-        names = ("shield_effect.csv", "shield_effect_summary.csv", "shield_effect.png")
+        stem = "shield_effect_relaxed" if args.relax_contacts else "shield_effect"
+        names = (f"{stem}.csv", f"{stem}_summary.csv", f"{stem}.png")
     print(f"wrote {', '.join(str(out / n) for n in names)} ({time.perf_counter() - t0:.0f} s)")
     return summary
 

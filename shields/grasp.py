@@ -99,6 +99,10 @@ class ShieldLimits:
     box_low, box_high : object origin box, world [m] (the four-finger env drops below
         ``z = 0.05`` or outside 0.045 m from the palm axis; the object rests at ``z`` 0.077)
     tilt_low, tilt_high : bounds on ``r_x`` and ``r_y`` [rad]
+    relax_contacts : off (default, the thesis): a shielded contact must end the step inside
+        its constraints. On: a contact row the current state already violates (a contact
+        sliding on MuJoCo's cone lies outside the inscribed pyramid) only must not get
+        worse, as the box and tilt bounds (an ablation; README, "QP shield")
     """
 
     c_min: float = 0.05
@@ -107,6 +111,7 @@ class ShieldLimits:
     box_high: tuple[float, float, float] = (0.03, 0.03, 0.12)
     tilt_low: float = -0.5
     tilt_high: float = 0.5
+    relax_contacts: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.c_min) and self.c_min >= 0):
@@ -122,6 +127,8 @@ class ShieldLimits:
             raise ShieldError("tilt_low and tilt_high must be finite [rad]")
         if not -np.pi < self.tilt_low < self.tilt_high < np.pi:
             raise ShieldError("need -pi < tilt_low < tilt_high < pi [rad]")
+        if not isinstance(self.relax_contacts, bool):
+            raise ShieldError(f"relax_contacts must be True or False, got {self.relax_contacts!r}")
 
 
 @dataclass
@@ -400,6 +407,8 @@ class GraspQP:
         A_c[:, 1 + k :] = fric + t_row
         low_c[:, 1 : 1 + k] = fric_low + t_low
         low_c[:, 1 + k :] = fric_low - t_low
+        if lim.relax_contacts:
+            np.minimum(low_c, 0.0, out=low_c)  # a violated row: no worse than now
         p = lin.object_pos
         r, dr = tilt_angles(lin.object_mat)
         A_g = np.concatenate([lin.F[:3], dr @ lin.F[3:]]) * s
