@@ -686,7 +686,7 @@ def cli(argv: Sequence[str]) -> dict[str, Any]:
         i = argv.index("--resume")
         cfg_file = Path(argv[i + 1]) / "config.json" if i + 1 < len(argv) else None
         if cfg_file is not None and cfg_file.is_file():
-            if "shield" in json.loads(cfg_file.read_text()):
+            if "object" not in json.loads(cfg_file.read_text()):  # rotation runs name one
                 return main(argv)
     from train import rotate
 
