@@ -524,11 +524,7 @@ def run_accuracy(
             bar.update()
     bar.close()
     env.close()
-    out.mkdir(parents=True, exist_ok=True)
-    _write_csv(out / "shield_accuracy.csv", rows)
-    summary = summarize_accuracy(rows)
-    _write_csv(out / "shield_accuracy_summary.csv", summary)
-    plot_accuracy(rows, out / "shield_accuracy.png")
+    _save(out, "shield_accuracy", rows, summarize_accuracy, plot_accuracy)
     return rows
 
 
@@ -696,11 +692,7 @@ def run_latency(
                     break
     bar.close()
     env.close()
-    out.mkdir(parents=True, exist_ok=True)
-    _write_csv(out / "shield_latency.csv", rows)
-    summary = summarize_latency(rows)
-    _write_csv(out / "shield_latency_summary.csv", summary)
-    plot_latency(rows, out / "shield_latency.png")
+    _save(out, "shield_latency", rows, summarize_latency, plot_latency)
     return rows
 
 
@@ -912,6 +904,23 @@ def run_episode(
     return row
 
 
+def _save(
+    out: Path,
+    name: str,
+    rows: list[dict[str, Any]],
+    summarize: Callable[[list[dict[str, Any]]], list[dict[str, Any]]],
+    plot: Callable[[list[dict[str, Any]], Path], Any],
+    plot_summary: bool = False,
+) -> None:
+    """``out/<name>.csv`` (rows), ``<name>_summary.csv`` and ``<name>.png`` (the chart of
+    the rows, or of the summary with ``plot_summary``)."""
+    out.mkdir(parents=True, exist_ok=True)
+    _write_csv(out / f"{name}.csv", rows)
+    summary = summarize(rows)
+    _write_csv(out / f"{name}_summary.csv", summary)
+    plot(summary if plot_summary else rows, out / f"{name}.png")
+
+
 def run_effect(
     out: Path,
     *,
@@ -947,11 +956,7 @@ def run_effect(
         bare.close()
         shielded.close()
     bar.close()
-    out.mkdir(parents=True, exist_ok=True)
-    _write_csv(out / f"{name}.csv", rows)
-    summary = summarize_effect(rows)
-    _write_csv(out / f"{name}_summary.csv", summary)
-    plot_effect(summary, out / f"{name}.png")
+    _save(out, name, rows, summarize_effect, plot_effect, plot_summary=True)
     return rows
 
 

@@ -371,19 +371,24 @@ def test_rgb_array_render() -> None:
     e.close()
 
 
+def _train_ppo(*args: str) -> subprocess.CompletedProcess:
+    """``python -m train.ppo *args`` in a subprocess from the checkout (5 min limit)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    return subprocess.run(
+        [sys.executable, "-m", "train.ppo", *args],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+
+
 def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     """``python -m train.ppo`` (no task: the rotation main job) with a tiny budget writes the
     model, normalisation, evaluation, curve; --resume adds steps."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
     tiny = [
         "--total-steps", "256", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64",
         "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32", "--eval-episodes", "2",
         "--eval-seconds", "1", "--checkpoint-every", "128", "--no-progress",
     ]  # fmt: skip
-    p = subprocess.run(
-        [sys.executable, "-m", "train.ppo", *tiny, "--out", str(tmp_path)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+    p = _train_ppo(*tiny, "--out", str(tmp_path))
     assert p.returncode == 0, p.stderr[-2000:]
     (run_dir,) = list(tmp_path.iterdir())
     for f in ("model.zip", "vecnormalize.pkl", "eval.json", "eval.csv", "curve.png"):
@@ -392,11 +397,7 @@ def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     assert res["num_timesteps"] == 256 and res["episodes"] == 2
     assert 0.0 <= res["drop_rate"] <= 1.0 and np.isfinite(res["speed_rad_s"])
     assert "rad/s" in p.stdout
-    q = subprocess.run(
-        [sys.executable, "-m", "train.ppo", "--resume", str(run_dir), "--total-steps", "128",
-         "--no-progress"],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+    q = _train_ppo("--resume", str(run_dir), "--total-steps", "128", "--no-progress")
     assert q.returncode == 0, q.stderr[-2000:]
     assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
 
@@ -404,16 +405,12 @@ def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
 def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
     """``python -m train.ppo --shield qp``: the envs (training and evaluation) run inside
     ``shields.GraspShield``; the run records it."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
     tiny = [
         "--shield", "qp", "--total-steps", "128", "--n-envs", "2", "--n-steps", "64",
         "--batch-size", "64", "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32",
         "--eval-episodes", "2", "--eval-seconds", "1", "--workers", "0", "--no-progress",
     ]  # fmt: skip
-    p = subprocess.run(
-        [sys.executable, "-m", "train.ppo", *tiny, "--out", str(tmp_path)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+    p = _train_ppo(*tiny, "--out", str(tmp_path))
     assert p.returncode == 0, p.stderr[-2000:]
     (run_dir,) = list(tmp_path.iterdir())
     assert "__qp__" in run_dir.name
