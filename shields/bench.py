@@ -1139,7 +1139,10 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--out", default="docs/bench", help="directory for the CSV and PNG")
     common.add_argument("--seed", type=int, default=0, help="seed of states, actions, grasps")
     common.add_argument("--no-progress", action="store_true", help="no progress bar")
-    a = sub.add_parser("accuracy", parents=[common], help="linearisation vs MuJoCo")
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    a = sub.add_parser(
+        "accuracy", parents=[common], help="linearisation vs MuJoCo", formatter_class=fmt
+    )
     a.add_argument("--states", type=_positive, default=20, help="states per source")
     a.add_argument("--sources", type=_csv_list(str, SOURCES), default=list(SOURCES),
                    help="comma-separated state sources: settled,random,policy")  # fmt: skip
@@ -1148,13 +1151,17 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--every", type=_positive, default=3, help="rollout steps between states")
     a.add_argument("--actions", type=_positive, default=4,
                    help="whole-action perturbations per state (policy states: 1)")  # fmt: skip
-    lat = sub.add_parser("latency", parents=[common], help="shield wall time per backend")
+    lat = sub.add_parser(
+        "latency", parents=[common], help="shield wall time per backend", formatter_class=fmt
+    )
     lat.add_argument("--episodes", type=_positive, default=4, help="rollouts per source")
     lat.add_argument("--steps", type=_positive, default=100, help="steps per rollout")
     lat.add_argument("--repeats", type=_positive, default=2, help="calls per backend and state")
     lat.add_argument("--sources", type=_csv_list(str, AGENTS), default=list(AGENTS),
                      help="comma-separated: random,policy")  # fmt: skip
-    e = sub.add_parser("effect", parents=[common], help="with vs without the shield")
+    e = sub.add_parser(
+        "effect", parents=[common], help="with vs without the shield", formatter_class=fmt
+    )
     e.add_argument("--episodes", type=_positive, default=40, help="paired episodes per agent")
     e.add_argument("--steps", type=_positive, default=400, help="steps per episode (20 Hz)")
     e.add_argument("--agents", type=_csv_list(str, AGENTS), default=list(AGENTS),
