@@ -66,8 +66,8 @@ holds (two point contacts: the spin about the line through them) gets no motion.
 What the linearisation leaves out (its accuracy is measured in tests/test_compliance.py and
 ``python -m shields.bench accuracy``): contacts that roll or slide, contacts that make or
 break, the change of the contact frames with the motion (Cutkosky's geometric stiffness), the
-servo's force limit (a saturated servo does not follow its setpoint), the torsional friction
-of ``condim`` 4 contacts (it adds stiffness about the normal), the dynamics within the step,
+servo's force limit (a saturated servo does not follow its setpoint), the dynamics within the
+step,
 and contacts between fingers. Palm and floor contacts are fixed bodies (zero ``J`` rows).
 """
 
@@ -193,6 +193,7 @@ class _HandInfo:
         self.dofs = np.array(dofs, dtype=np.int64)
         self.C_joint = 1.0 / np.array(kp)
         self.names = [model.body(b).name for b in range(model.nbody)]
+        self.nbody = model.nbody
         self.geom_body = model.geom_bodyid.tolist()
         self.static = (model.body_weldid == 0).tolist()
 
@@ -203,6 +204,8 @@ _INFO: dict[tuple[int, str], _HandInfo] = {}
 def _info(model: mujoco.MjModel, object_body: str) -> _HandInfo:
     key = (id(model), object_body)
     info = _INFO.get(key)
+    if info is not None and (len(info.geom_body) != model.ngeom or info.nbody != model.nbody):
+        info = None  # a new model at a freed model's address
     if info is None:
         if len(_INFO) > 64:
             _INFO.clear()

@@ -31,11 +31,13 @@ moving further out).
 
 Contact subsets (thesis' enumeration): the contacts of one hand link are shielded or not
 together (a link is the unit the observation reports). Every set of at least two touching
-links whose contacts are in force closure is a candidate (tested on the inscribed friction
-pyramids' primitive wrenches, the Ferrari-Canny construction of :mod:`stability.gws`, with
-point contacts: fewer than three contacts are never in force closure). The servos of the
+links whose contacts are in force closure is a candidate, tested on the primitive wrenches
+of the same inscribed cones the constraints enforce (the Ferrari-Canny construction of
+:mod:`stability.gws`): the friction polygon's k vertices and, with torsional friction,
+the two rays ``c_tau = +-mu_tau c_n``. Two such soft-finger contacts can be in force
+closure; point contacts need three. The servos of the
 unshielded links' kinematic chains keep the agent's action. The candidate with the
-smallest ``||a~ - a||`` wins, ties to the one that shields more contacts. For speed, each
+smallest ``||a~ - a||`` wins, ties to the one that shields more links. For speed, each
 set's QP is solved first and its force closure (one more QP) tested only if its solution
 would win; the answer is the same as testing every set first.
 
@@ -49,9 +51,13 @@ Outcomes (``ShieldResult.status``):
   closure: there is no stable grasp to keep, and ``a`` passes unchanged.
 
 QP backends: DAQP (default; a dual active-set solver for small dense QPs, one solve per
-candidate with ``H = I``) and OSQP (one setup per step, i.e. one KKT factorisation; each
-candidate only updates the bounds: unshielded rows to +-inf, fixed servos to ``l = u``).
-Both results are verified against the linear model before they are used.
+candidate with ``H = I``, whose factorisation is trivial: the candidates differ in rows and
+free variables, so there is nothing else to reuse) and OSQP (one setup per step with every
+row; each candidate only updates the bounds: unshielded rows to +-inf, fixed servos to ``l
+= u``. The sparsity pattern and its symbolic factorisation are reused, but OSQP refactors
+numerically whenever a row changes type (loose, inequality, equality), which every candidate
+does, and polishing factors a reduced system: about two numeric factorisations per
+candidate). Both results are verified against the linear model before they are used.
 """
 
 from __future__ import annotations
@@ -141,7 +147,7 @@ class ShieldResult:
     correction : ``||a~ - a||`` (Euclidean, action units)
     candidates : force-closure link sets found among those tested (1 when the agent's action
         is safe: the set it keeps); a set is tested only if its QP solution would win
-    qps : QPs solved (one per link set of >= 2 links and >= 3 contacts)
+    qps : QPs solved (one per link set that could be in force closure)
     violation : largest constraint violation of ``a~`` under the linear model, for its
         candidate's constraints (<= 1e-6 for ``"safe"`` and ``"corrected"``) [N, m, rad]
     solve_time_s : wall time of the whole shield call, linearisation included [s]
@@ -167,9 +173,10 @@ class ShieldProblem:
     then the k friction edges with ``-rho c_tau``, then with ``+rho c_tau``; upper bound
     +inf); A_global (5, l), low_global, high_global:
     object position (3) and tilt (2) rows; x_low, x_high: action bounds (l,);
-    W_groups : per link, the primitive wrenches (contacts, k, 6) of its contacts' friction
-    pyramid edges (torques divided by the grasp's largest contact distance from the object
-    origin).
+    W_groups : per link, the primitive wrenches (contacts, rays, 6) of its contacts'
+    inscribed cones (the rows' extreme rays; torques divided by the grasp's largest contact
+    distance from the object origin); soft_groups : per link, its contacts with torsional
+    friction.
     """
 
     lin: GraspLinearization
@@ -184,18 +191,27 @@ class ShieldProblem:
     x_low: NDArray[np.float64]
     x_high: NDArray[np.float64]
     W_groups: list[NDArray[np.float64]]
+    soft_groups: list[int]
     _closure: dict[int, bool] = field(default_factory=dict)
     _candidates: list[int] | None = None
     _blocks: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
 
+    def _possible(self, mask: int) -> bool:
+        """At least two links and enough contacts for force closure: three point contacts,
+        or two of which one has torsional friction (a soft finger)."""
+        members = [g for g in range(len(self.groups)) if mask >> g & 1]
+        n_contacts = sum(len(self.groups[g]) for g in members)
+        soft = sum(self.soft_groups[g] for g in members)
+        return len(members) >= 2 and n_contacts >= (2 if soft else 3)
+
     def closure(self, mask: int) -> bool:
         """Force closure of the contacts of the links in ``mask`` (memoised; a superset of a
-        force-closure set is one; fewer than three point contacts never are)."""
+        force-closure set is one; see :meth:`_possible`)."""
         hit = self._closure.get(mask)
         if hit is not None:
             return hit
         members = [g for g in range(len(self.groups)) if mask >> g & 1]
-        if sum(len(self.groups[g]) for g in members) < 3 or len(members) < 2:
+        if not self._possible(mask):
             ok = False
         elif any(self._closure.get(mask & ~(1 << g), False) for g in members):
             ok = True
@@ -206,15 +222,11 @@ class ShieldProblem:
         return ok
 
     def link_sets(self) -> list[int]:
-        """Bit masks of the link sets that could be in force closure (>= 2 links, >= 3
-        contacts), the largest first."""
+        """Bit masks of the link sets that could be in force closure (:meth:`_possible`), the
+        largest first."""
         n = len(self.groups)
-        sizes = [len(g) for g in self.groups]
         return [
-            mask
-            for size in range(n, 1, -1)
-            for mask in _masks(n, size)
-            if sum(sizes[g] for g in range(n) if mask >> g & 1) >= 3
+            mask for size in range(n, 1, -1) for mask in _masks(n, size) if self._possible(mask)
         ]
 
     @property
@@ -262,7 +274,8 @@ class ShieldProblem:
         A, low, high = self.rows(mask) if rows is None else rows
         y = A @ x
         v = np.concatenate([low - y, y - high, self.x_low - x, x - self.x_high])
-        return max(float(v.max()), 0.0)
+        worst = float(v.max())
+        return max(worst, 0.0) if np.isfinite(worst) else np.inf  # NaN: not verified
 
 
 def tilt_angles(object_mat: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray]:
@@ -283,9 +296,16 @@ def tilt_angles(object_mat: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return r, dr
 
 
-def _pyramid(edges: int) -> tuple[NDArray[np.float64], float]:
+def _pyramid(edges: int) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """Facet normals ``e_j`` (k, 2) at ``2 pi j / k``, the apothem ``cos(pi / k)`` of the
+    unit-circumradius k-gon, and its vertices (k, 2) at ``2 pi j / k + pi / k``."""
     theta = 2.0 * np.pi * np.arange(edges) / edges
-    return np.stack([np.cos(theta), np.sin(theta)], axis=1), float(np.cos(np.pi / edges))
+    v = theta + np.pi / edges
+    return (
+        np.stack([np.cos(theta), np.sin(theta)], axis=1),
+        float(np.cos(np.pi / edges)),
+        np.stack([np.cos(v), np.sin(v)], axis=1),
+    )
 
 
 def force_closure_wrenches(W: NDArray[np.float64]) -> bool:
@@ -367,7 +387,7 @@ class GraspQP:
         for b in range(1, model.nbody):
             dofs = set(range(model.body_dofadr[b], model.body_dofadr[b] + model.body_dofnum[b]))
             self.chain[b] = self.chain[model.body_parentid[b]] | np.isin(servo_dof, list(dofs))
-        self.dirs, self.apothem = _pyramid(self.limits.edges)
+        self.dirs, self.apothem, self.verts = _pyramid(self.limits.edges)
         # check the model once (raises ShieldError for what linearize cannot model)
         linearize(model, mujoco.MjData(model), object_body, horizon=self.horizon)
         self.last_problem: ShieldProblem | None = None
@@ -418,12 +438,17 @@ class GraspQP:
         ctrl = data.ctrl
         x_low = np.maximum(-1.0, (self.ctrl_low - ctrl) / s)
         x_high = np.minimum(1.0, (self.ctrl_high - ctrl) / s)
-        # primitive wrenches of each contact's pyramid edges, torques over a length scale
+        # primitive wrenches: the extreme rays (at c_n = 1) of the cone the rows above enforce,
+        # i.e. the k vertices mu (cos, sin)(2 pi j / k + pi / k) of the friction polygon and,
+        # with torsional friction, the rays c_tau = +-mu_tau (a soft-finger contact; a point
+        # contact gets the normal twice, which is inside its cone); torques over a length
         L = max(float(np.abs(lin.points - lin.object_pos).max(initial=0.0)), 1e-3)
-        e = np.empty((m, k, 3))
+        e = np.zeros((m, k + 2 if nc == 4 else k, nc))
         e[:, :, 0] = 1.0
-        e[:, :, 1:] = lin.mu[:, None, None] * self.dirs[None]
-        Gm = lin.G.reshape(6, m, nc)[:, :, :3].transpose(1, 0, 2)  # (m, 6, 3): forces
+        e[:, :k, 1:3] = lin.mu[:, None, None] * self.verts[None]
+        if nc == 4:
+            e[:, k, 3], e[:, k + 1, 3] = lin.mu_torsion, -lin.mu_torsion
+        Gm = lin.G.reshape(6, m, nc).transpose(1, 0, 2)  # (m, 6, nc)
         W = np.einsum("mwc,mkc->mkw", Gm, e)
         W[:, :, 3:] /= L
         prob = ShieldProblem(
@@ -439,6 +464,7 @@ class GraspQP:
             x_low=np.minimum(x_low, 0.0),
             x_high=np.maximum(x_high, 0.0),
             W_groups=[W[groups[b]] for b in bodies],
+            soft_groups=[int(np.count_nonzero(lin.mu_torsion[groups[b]] > 0)) for b in bodies],
         )
         return prob
 
@@ -457,6 +483,8 @@ class GraspQP:
         a_eff = np.minimum(np.maximum(a, prob.x_low), prob.x_high)
         n = len(prob.groups)
         full = (1 << n) - 1
+        finite = bool(np.isfinite(prob.A_contact).all() and np.isfinite(prob.A_global).all())
+        finite = finite and bool(np.isfinite(prob.low_contact).all())
 
         def done(
             x: NDArray, status: str, mask: int, cands: int, qps: int, viol: float
@@ -473,6 +501,8 @@ class GraspQP:
                 solve_time_s=time.perf_counter() - t0,
             )
 
+        if not finite:  # a broken state (NaN/inf in MuJoCo's data): nothing to trust
+            return done(np.zeros(self.l), "fallback", 0, 0, 0, 0.0)
         # the agent's action: it is safe if the links whose constraints it satisfies are in
         # force closure (every candidate is a subset of that set or violated)
         tol = _TOL
@@ -488,7 +518,7 @@ class GraspQP:
                 return done(a.copy(), "safe", ok, 1, 0, prob.violation(ok, a_eff))
         if n < 2 or not prob.closure(full):
             return done(a.copy(), "no_closure", 0, 0, 0, 0.0)
-        # every link set that could be in force closure (>= 2 links, >= 3 contacts), the
+        # every link set that could be in force closure (ShieldProblem._possible), the
         # largest first; a set's QP is solved first and its force closure tested only if its
         # solution would win (the closure test costs more than the QP)
         sets = prob.link_sets()

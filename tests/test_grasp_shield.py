@@ -168,6 +168,41 @@ def test_no_grasp_passes_the_action(env: FourFingerRotate) -> None:
     np.testing.assert_array_equal(res.action, a)
 
 
+def test_two_soft_fingertips_can_be_a_candidate(env: FourFingerRotate) -> None:
+    """With torsional friction (condim 4) two fingertip contacts can be in force closure, so a
+    three-finger grasp has two-finger candidates (one finger may be released); without it
+    (point contacts) no pair of single contacts is."""
+    point_env = FourFingerRotate(torsional=False)
+    found = {True: 0, False: 0}
+    for e, soft in ((env, True), (point_env, False)):
+        qp = shield_for(e)
+        for g in range(12):
+            e.reset(options={"grasp": g})
+            e.step(np.zeros(12, dtype=np.float32))
+            prob = qp.problem(e.data)
+            if len(prob.groups) != 3 or any(len(m) != 1 for m in prob.groups):
+                continue
+            pairs = [mask for mask in prob.candidates if bin(mask).count("1") == 2]
+            if soft:
+                found[True] += bool(pairs)
+            else:
+                assert not pairs
+                found[False] += 1
+    assert found[True] >= 1 and found[False] >= 1
+
+
+def test_broken_state_takes_the_fallback(env: FourFingerRotate) -> None:
+    """NaN in MuJoCo's data (a diverged simulation) gives the fallback, not an exception."""
+    qp = shield_for(env)
+    env.reset(options={"grasp": 2})
+    env.data.qvel[:] = np.nan
+    mujoco.mj_forward(env.model, env.data)
+    res = qp(env.data, np.full(12, 0.3))
+    assert res.status in ("fallback", "no_closure")
+    assert np.all(np.isfinite(res.action))
+    env.reset(options={"grasp": 2})
+
+
 def test_force_closure_agrees_with_gws() -> None:
     """The shield's fast test (one QP) against stability.gws.force_closure (convex hull)."""
     rng = np.random.default_rng(11)
