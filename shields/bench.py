@@ -904,6 +904,11 @@ def run_episode(
     return row
 
 
+def effect_name(relax_contacts: bool, soft_closure: bool) -> str:
+    """File stem of an ``effect`` run: ``shield_effect[_relaxed][_soft]``."""
+    return "shield_effect" + "_relaxed" * relax_contacts + "_soft" * soft_closure
+
+
 def _save(
     out: Path,
     name: str,
@@ -930,13 +935,15 @@ def run_effect(
     agents: Sequence[str] = AGENTS,
     progress: bool = True,
     relax_contacts: bool = False,
+    soft_closure: bool = False,
 ) -> list[dict[str, Any]]:
     """The ``effect`` measurement (module docstring): one row per episode, written to
     ``out/shield_effect.csv``; summary ``shield_effect_summary.csv``; chart
-    ``shield_effect.png`` (``shield_effect_relaxed*`` with ``relax_contacts``: the shield
-    with :attr:`shields.grasp.ShieldLimits.relax_contacts`). Returns the rows."""
-    name = "shield_effect_relaxed" if relax_contacts else "shield_effect"
-    limits = ShieldLimits(relax_contacts=relax_contacts)
+    ``shield_effect.png`` (``shield_effect_relaxed*``, ``shield_effect_soft*`` with
+    ``relax_contacts``, ``soft_closure``: those :class:`shields.grasp.ShieldLimits`
+    options). Returns the rows."""
+    name = effect_name(relax_contacts, soft_closure)
+    limits = ShieldLimits(relax_contacts=relax_contacts, soft_closure=soft_closure)
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=len(agents) * episodes * 2, desc="effect episodes", disable=not progress)
     for agent in agents:
@@ -1171,6 +1178,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the shield with ShieldLimits(relax_contacts=True) (an ablation)",
     )
+    e.add_argument(
+        "--soft-closure",
+        action="store_true",
+        help="the shield with ShieldLimits(soft_closure=True) (an ablation)",
+    )
     return p
 
 
@@ -1202,10 +1214,11 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
         rows = run_effect(
             out, seed=args.seed, episodes=args.episodes, steps=args.steps,
             agents=args.agents, progress=progress, relax_contacts=args.relax_contacts,
+            soft_closure=args.soft_closure,
         )  # fmt: skip
         summary = summarize_effect(rows)
         _print_effect(summary)
-        stem = "shield_effect_relaxed" if args.relax_contacts else "shield_effect"
+        stem = effect_name(args.relax_contacts, args.soft_closure)
         names = (f"{stem}.csv", f"{stem}_summary.csv", f"{stem}.png")
     print(f"wrote {', '.join(str(out / n) for n in names)} ({time.perf_counter() - t0:.0f} s)")
     return summary

@@ -32,10 +32,12 @@ moving further out).
 Contact subsets (thesis' enumeration): the contacts of one hand link are shielded or not
 together (a link is the unit the observation reports). Every set of at least two touching
 links whose contacts are in force closure is a candidate, tested on the primitive wrenches
-of the same inscribed cones the constraints enforce (the Ferrari-Canny construction of
-:mod:`stability.gws`): the friction polygon's k vertices and, with torsional friction,
-the two rays ``c_tau = +-mu_tau c_n``. Two such soft-finger contacts can be in force
-closure; point contacts need three. The servos of the
+of the friction polygon the constraints enforce (its k vertices; the Ferrari-Canny
+construction of :mod:`stability.gws`), i.e. as point contacts, which need three contacts.
+``ShieldLimits(soft_closure=True)`` adds the torsional rays ``c_tau = +-mu_tau c_n`` of
+condim-4 contacts (soft fingers), so that two fingertips can be a candidate; measured,
+that shield releases more and drops the object more often (README), so it is not the
+default. The servos of the
 unshielded links' kinematic chains keep the agent's action. The candidate with the
 smallest ``||a~ - a||`` wins, ties to the one that shields more links. For speed, each
 set's QP is solved first and its force closure (one more QP) tested only if its solution
@@ -109,6 +111,10 @@ class ShieldLimits:
         its constraints. On: a contact row the current state already violates (a contact
         sliding on MuJoCo's cone lies outside the inscribed pyramid) only must not get
         worse, as the box and tilt bounds (an ablation; README, "QP shield")
+    soft_closure : off (default): force closure of a link set is tested with point contacts
+        (the polygon's vertices only), so at least three contacts are needed. On: with the
+        torsional rays of condim-4 contacts too (soft fingers), so two fingertips can be a
+        candidate. Measured: on, the shield releases more and drops more (README)
     """
 
     c_min: float = 0.05
@@ -118,6 +124,7 @@ class ShieldLimits:
     tilt_low: float = -0.5
     tilt_high: float = 0.5
     relax_contacts: bool = False
+    soft_closure: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.c_min) and self.c_min >= 0):
@@ -133,8 +140,9 @@ class ShieldLimits:
             raise ShieldError("tilt_low and tilt_high must be finite [rad]")
         if not -np.pi < self.tilt_low < self.tilt_high < np.pi:
             raise ShieldError("need -pi < tilt_low < tilt_high < pi [rad]")
-        if not isinstance(self.relax_contacts, bool):
-            raise ShieldError(f"relax_contacts must be True or False, got {self.relax_contacts!r}")
+        for name in ("relax_contacts", "soft_closure"):
+            if not isinstance(getattr(self, name), bool):
+                raise ShieldError(f"{name} must be True or False, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -440,13 +448,14 @@ class GraspQP:
         x_high = np.minimum(1.0, (self.ctrl_high - ctrl) / s)
         # primitive wrenches: the extreme rays (at c_n = 1) of the cone the rows above enforce,
         # i.e. the k vertices mu (cos, sin)(2 pi j / k + pi / k) of the friction polygon and,
-        # with torsional friction, the rays c_tau = +-mu_tau (a soft-finger contact; a point
-        # contact gets the normal twice, which is inside its cone); torques over a length
+        # with soft_closure and torsional friction, the rays c_tau = +-mu_tau (a soft-finger
+        # contact; a point contact gets the normal twice, inside its cone); torques over L
         L = max(float(np.abs(lin.points - lin.object_pos).max(initial=0.0)), 1e-3)
-        e = np.zeros((m, k + 2 if nc == 4 else k, nc))
+        soft = nc == 4 and lim.soft_closure
+        e = np.zeros((m, k + 2 if soft else k, nc))
         e[:, :, 0] = 1.0
         e[:, :k, 1:3] = lin.mu[:, None, None] * self.verts[None]
-        if nc == 4:
+        if soft:
             e[:, k, 3], e[:, k + 1, 3] = lin.mu_torsion, -lin.mu_torsion
         Gm = lin.G.reshape(6, m, nc).transpose(1, 0, 2)  # (m, 6, nc)
         W = np.einsum("mwc,mkc->mkw", Gm, e)
@@ -464,7 +473,9 @@ class GraspQP:
             x_low=np.minimum(x_low, 0.0),
             x_high=np.maximum(x_high, 0.0),
             W_groups=[W[groups[b]] for b in bodies],
-            soft_groups=[int(np.count_nonzero(lin.mu_torsion[groups[b]] > 0)) for b in bodies],
+            soft_groups=[
+                int(np.count_nonzero(lin.mu_torsion[groups[b]] > 0)) if soft else 0 for b in bodies
+            ],
         )
         return prob
 
