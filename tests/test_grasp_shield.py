@@ -187,6 +187,25 @@ def test_two_soft_fingertips_can_be_a_candidate(env: FourFingerRotate) -> None:
     assert found >= 1
 
 
+def test_relaxed_contacts_accept_holding_still(env: FourFingerRotate) -> None:
+    """``relax_contacts``: a contact row the state already violates only must not get worse,
+    so keeping every setpoint (the zero action, which changes nothing under the linear
+    model) is safe wherever the links are in force closure; the thesis' strict rows
+    correct it where a contact is already outside its cone."""
+    strict, relaxed = shield_for(env), shield_for(env, limits=ShieldLimits(relax_contacts=True))
+    corrected = 0
+    for g in range(16):
+        env.reset(options={"grasp": g})
+        env.step(np.zeros(12, dtype=np.float32))
+        r = relaxed(env.data, np.zeros(12))
+        assert r.status in ("safe", "no_closure")
+        if strict(env.data, np.zeros(12)).status == "corrected":
+            assert r.status == "safe"
+            assert (strict.last_problem.low_contact > 1e-6).any()  # a violated row
+            corrected += 1
+    assert corrected >= 1
+
+
 def test_broken_state_takes_the_fallback(env: FourFingerRotate) -> None:
     """NaN in MuJoCo's data (a diverged simulation) gives the fallback, not an exception."""
     qp = shield_for(env)
