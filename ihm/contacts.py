@@ -44,7 +44,13 @@ from numpy.typing import NDArray
 
 from stability import Grasp, GraspError
 
-__all__ = ["SceneGrasp", "grasp_from_mujoco", "hand_coordinates", "transmission"]
+__all__ = [
+    "SceneGrasp",
+    "body_subtree",
+    "grasp_from_mujoco",
+    "hand_coordinates",
+    "transmission",
+]
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
@@ -118,7 +124,8 @@ def _body_id(model: mujoco.MjModel, name: str) -> int:
     return i
 
 
-def _subtree(model: mujoco.MjModel, root: int) -> NDArray[np.bool_]:
+def body_subtree(model: mujoco.MjModel, root: int) -> NDArray[np.bool_]:
+    """``(nbody,)`` mask of ``root`` and its descendants (the object and what it carries)."""
     inside = np.zeros(model.nbody, dtype=bool)
     inside[root] = True
     for b in range(root + 1, model.nbody):  # parents precede children
@@ -137,7 +144,7 @@ def hand_coordinates(
     equalities, and the names of the ``l`` independent joints.
     """
     obj = _body_id(model, object_body)
-    in_obj = _subtree(model, obj)
+    in_obj = body_subtree(model, obj)
     joints = [
         j
         for j in range(model.njnt)
@@ -244,7 +251,7 @@ def grasp_from_mujoco(
         a hand joint that is not a hinge or slide; a nonlinear joint coupling.
     """
     obj = _body_id(model, object_body)
-    in_obj = _subtree(model, obj)
+    in_obj = body_subtree(model, obj)
     hand_dofs, T, joint_names = hand_coordinates(model, data, object_body)
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()

@@ -124,6 +124,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from envs.four_finger import CONTACT_LINKS, FourFingerRotate
+from ihm.contacts import body_subtree
 from ihm.hands.four_finger import ACTUATOR_NAMES
 from shields.compliance import GraspLinearization, linearize
 from shields.grasp import BACKENDS, STATUSES, GraspQP, ShieldLimits
@@ -184,11 +185,7 @@ class _Links:
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.link_of_body = {model.body(n).id: k for k, n in enumerate(CONTACT_LINKS)}
-        obj = model.body("object").id
-        in_obj = np.zeros(model.nbody, dtype=bool)
-        in_obj[obj] = True
-        for b in range(obj + 1, model.nbody):
-            in_obj[b] = in_obj[model.body_parentid[b]]
+        in_obj = body_subtree(model, model.body("object").id)
         self.geom_obj = in_obj[model.geom_bodyid].tolist()
         self.geom_link = [self.link_of_body.get(int(b), -1) for b in model.geom_bodyid]
 

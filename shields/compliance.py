@@ -79,6 +79,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from ihm.contacts import body_subtree
+
 __all__ = ["GraspLinearization", "ShieldError", "linearize"]
 
 
@@ -165,11 +167,7 @@ class _HandInfo:
         if model.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC:
             raise ShieldError("the compliance model reads elliptic-cone contact rows; set cone")
         self.obj = obj
-        in_obj = np.zeros(model.nbody, dtype=bool)
-        in_obj[obj] = True
-        for b in range(obj + 1, model.nbody):
-            in_obj[b] = in_obj[model.body_parentid[b]]
-        self.in_obj = in_obj.tolist()
+        self.in_obj = body_subtree(model, obj).tolist()
         dofs, kp = [], []
         for a in range(model.nu):
             if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
