@@ -42,7 +42,7 @@ import sys
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,6 @@ import rerun.blueprint as rrb
 
 from ihm.hands.four_finger import ACTUATOR_NAMES, NU
 from ihm.rerun_log import SceneRecorder
-from shields import GraspShield
 from shields.grasp import BACKENDS
 from train.gait import SHIPPED, load_policy
 from train.ppo import build_parser, opt
@@ -229,10 +228,11 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
         agent = policy_dir.resolve().name
     env_cfg = RotateConfig(**env_opts)
     settings = ["none", "qp"] if cfg.shield == "both" else [cfg.shield]
-    envs: dict[str, gym.Env] = {}
-    for s in settings:
-        env = make_env(env_cfg, max_steps=cfg.steps)()
-        envs[s] = GraspShield(env, backend=cfg.backend) if s == "qp" else env
+    # train.rotate.make_env wraps the env in shields.GraspShield for shield "qp"
+    envs: dict[str, gym.Env] = {
+        s: make_env(replace(env_cfg, shield=s, shield_backend=cfg.backend), max_steps=cfg.steps)()
+        for s in settings
+    }
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(cfg.out)
     results = []
