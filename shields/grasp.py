@@ -204,10 +204,14 @@ class ShieldProblem:
     _candidates: list[int] | None = None
     _blocks: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
 
+    def members(self, mask: int) -> list[int]:
+        """Indices of the links (groups) in the bit mask ``mask``."""
+        return [g for g in range(len(self.groups)) if mask >> g & 1]
+
     def _possible(self, mask: int) -> bool:
         """At least two links and enough contacts for force closure: three point contacts,
         or two of which one has torsional friction (a soft finger)."""
-        members = [g for g in range(len(self.groups)) if mask >> g & 1]
+        members = self.members(mask)
         n_contacts = sum(len(self.groups[g]) for g in members)
         soft = sum(self.soft_groups[g] for g in members)
         return len(members) >= 2 and n_contacts >= (2 if soft else 3)
@@ -218,7 +222,7 @@ class ShieldProblem:
         hit = self._closure.get(mask)
         if hit is not None:
             return hit
-        members = [g for g in range(len(self.groups)) if mask >> g & 1]
+        members = self.members(mask)
         if not self._possible(mask):
             ok = False
         elif any(self._closure.get(mask & ~(1 << g), False) for g in members):
@@ -256,7 +260,7 @@ class ShieldProblem:
                 (self.A_contact[members].reshape(-1, nl), self.low_contact[members].reshape(-1))
                 for members in self.groups
             ]
-        sel = [self._blocks[g] for g in range(len(self.groups)) if mask >> g & 1]
+        sel = [self._blocks[g] for g in self.members(mask)]
         A = np.concatenate([b[0] for b in sel] + [self.A_global])
         low = np.concatenate([b[1] for b in sel] + [self.low_global])
         high = np.full(len(low), np.inf)
@@ -500,7 +504,7 @@ class GraspQP:
         def done(
             x: NDArray, status: str, mask: int, cands: int, qps: int, viol: float
         ) -> ShieldResult:
-            links = tuple(prob.links[g] for g in range(n) if mask >> g & 1)
+            links = tuple(prob.links[g] for g in prob.members(mask))
             return ShieldResult(
                 action=x,
                 status=status,
@@ -600,10 +604,9 @@ class GraspQP:
         contact_rows = np.arange(n_c).reshape(m, k1) + n
         for mask in masks:
             low, high = low0.copy(), high0.copy()
-            for g, members in enumerate(prob.groups):
-                if mask >> g & 1:
-                    rows = contact_rows[members].reshape(-1)
-                    low[rows] = prob.low_contact[members].reshape(-1)
+            for g in prob.members(mask):
+                contacts = prob.groups[g]
+                low[contact_rows[contacts].reshape(-1)] = prob.low_contact[contacts].reshape(-1)
             fixed = prob.fixed(mask)
             low[:n][fixed] = high[:n][fixed] = a_eff[fixed]
             solver.update(l=low, u=high)
