@@ -15,9 +15,11 @@ from the landed model's settings to the shipped env, one change at a time:
 7. ``+ torsional friction``: ``condim`` 4 (what the task needs: without it PPO learned to
    spin the sphere freely between two antipodal point contacts). ``grasp_from_mujoco``
    refuses ``condim`` 4, so this comes after the observation row;
-8. ``+ solver tolerance 1e-6``: PGS stops at 1e-6 instead of MuJoCo's 1e-8 (= the shipped
-   env);
-9. ``+ 2.5 ms x 20 (not shipped)``: the timestep 2.5 ms (solref 0.01 s is 4 timesteps): what
+8. ``+ solver tolerance 1e-6``: PGS stops at 1e-6 instead of MuJoCo's 1e-8;
+9. ``+ explicit pairs, Euler``: the contacts the scene allows as explicit ``<pair>``s (no
+   broadphase) and the ``Euler`` integrator, which computes what ``implicitfast`` does on
+   this model: the same physics to rounding (= the shipped env);
+10. ``+ 2.5 ms x 20 (not shipped)``: the timestep 2.5 ms (solref 0.01 s is 4 timesteps): what
    a further cut of the substeps would buy, and what it changes.
 
 Each row is the median over ``--repeats`` runs of ``--steps`` env steps (the rows take
@@ -53,7 +55,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from envs.four_finger import FRAME_SKIP, TIMESTEP, FourFingerRotate, grasp_cache, yaw_rate
+from envs.four_finger import (
+    FRAME_SKIP,
+    TIMESTEP,
+    FourFingerRotate,
+    _Physics,
+    grasp_cache,
+    yaw_rate,
+)
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
 from stability import GraspError
@@ -87,9 +96,12 @@ def _slow_observe(env: FourFingerRotate) -> Callable[[], np.ndarray]:
 
 
 def make(level: int) -> FourFingerRotate:
-    """A fresh env with the settings of row ``level`` (1..9; ``SHIPPED`` is the shipped env)."""
-    timestep, frame_skip = (0.0025, 20) if level >= 9 else (TIMESTEP, FRAME_SKIP)
+    """A fresh env with the settings of row ``level`` (1..10; ``SHIPPED`` is the shipped env)."""
+    timestep, frame_skip = (0.0025, 20) if level >= 10 else (TIMESTEP, FRAME_SKIP)
     env = FourFingerRotate(torsional=level >= 7, timestep=timestep, frame_skip=frame_skip)
+    if level <= 8:  # the scene's own contacts (broadphase) and implicitfast integrator
+        env._ph = _Physics("sphere", True, timestep, torsional=level >= 7, explicit_pairs=False)
+        env.model, env.data = env._ph.model, env._ph.data
     m = env.model
     if level <= 7:
         m.opt.tolerance = 1e-8  # MuJoCo's default
@@ -120,10 +132,11 @@ ROWS = (
     "+ PGS",
     "+ fast observation",
     "+ torsional friction",
-    "+ solver tolerance 1e-6 (shipped)",
+    "+ solver tolerance 1e-6",
+    "+ explicit pairs, Euler (shipped)",
     "+ 2.5 ms x 20 (not shipped)",
 )
-SHIPPED = 8
+SHIPPED = 9
 
 
 def steps_per_second(levels: Sequence[int], steps: int, repeats: int, seed: int = 0) -> dict:
