@@ -501,6 +501,22 @@ def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
     assert res["num_timesteps"] == 128 and 0.0 <= res["intervention_rate"] <= 1.0
 
 
+def test_train_timestep_option_keeps_the_policy_period() -> None:
+    """``python -m train.ppo --timestep``: the env runs 0.05 s / timestep substeps (a 20 Hz
+    policy either way), and a timestep that does not divide 0.05 s is refused."""
+    from train.rotate import env_physics, make_env, parse_config
+
+    cfg = parse_config(["--timestep", "0.0025"])
+    env = make_env(cfg)()
+    assert env.unwrapped.model.opt.timestep == 0.0025 and env.unwrapped.frame_skip == 20
+    assert env.unwrapped.dt == pytest.approx(0.05)
+    assert env_physics(TIMESTEP) == {"timestep": TIMESTEP, "frame_skip": FRAME_SKIP}
+    with pytest.raises(SystemExit):
+        parse_config(["--timestep", "0.003"])
+    with pytest.raises(ValueError, match="divide"):
+        env_physics(0.0)
+
+
 def test_gait_period_of_a_periodic_signal() -> None:
     from train.gait import gait_period
 

@@ -50,8 +50,11 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
+    from train.rotate import env_physics
+
     keys = {"object": "sphere", "gravity": True, "torsional": True}
-    return act, {k: cfg.get(k, v) for k, v in keys.items()}
+    kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
+    return act, {**kwargs, **env_physics(cfg.get("timestep", 0.002))}
 
 
 def rollout(

@@ -226,7 +226,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
         policy_dir = Path(cfg.policy) if cfg.policy else SHIPPED
         act, env_opts = load_policy(policy_dir)
         agent = policy_dir.resolve().name
-    env_cfg = RotateConfig(**env_opts)
+    # the env options as RotateConfig fields (its timestep gives frame_skip back)
+    known = RotateConfig.__dataclass_fields__
+    env_cfg = RotateConfig(**{k: v for k, v in env_opts.items() if k in known})
     settings = ["none", "qp"] if cfg.shield == "both" else [cfg.shield]
     # train.rotate.make_env wraps the env in shields.GraspShield for shield "qp"
     envs: dict[str, gym.Env] = {
