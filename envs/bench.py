@@ -41,6 +41,11 @@ ratios to the in-process setup.
 (:func:`timestep_fidelity`: one policy step from the shipped policy's states against a
 converged reference), written to four_finger_fidelity.csv.
 
+``--transfer`` evaluates the shipped policy (trained at 2 ms) and one trained at 2.5 ms
+(``policies/four_finger_sphere_2.5ms``, ``python -m train.ppo --timestep 0.0025``, same
+seed and budget) under 1, 2 and 2.5 ms physics (:func:`timestep_transfer`), written to
+four_finger_transfer.csv.
+
 Writes ``--out``/four_finger_env.csv and four_finger_env.png.
 """
 
@@ -252,6 +257,39 @@ def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, obje
     return rows
 
 
+TRANSFER_POLICIES = ("four_finger_sphere", "four_finger_sphere_2.5ms")  # in policies/
+TRANSFER_PHYSICS = (("1 ms x 50", 0.001, 50), ("2 ms x 25", 0.002, 25), ("2.5 ms x 20", 0.0025, 20))
+
+
+def timestep_transfer(episodes: int = 100, seconds: float = 20.0) -> list[dict[str, object]]:
+    """Does a policy trained on coarser physics still work on finer physics? Each policy of
+    :data:`TRANSFER_POLICIES` (its training timestep in its config.json), deterministic,
+    under each physics of :data:`TRANSFER_PHYSICS` (20 Hz policy in every case), over
+    ``episodes`` episodes of ``seconds`` from the same start grasps (the shipped env's
+    cache, 2 ms): mean and median speed [rad/s] and drops."""
+    from train.gait import SHIPPED, evaluate, load_policy
+
+    start = grasp_cache("sphere", True)
+    rows = []
+    for name in TRANSFER_POLICIES:
+        act, kw = load_policy(SHIPPED.parent / name)
+        for label, timestep, frame_skip in TRANSFER_PHYSICS:
+            physics = {"timestep": timestep, "frame_skip": frame_skip}
+            r = evaluate(act, {**kw, **physics}, episodes, seconds, start_grasps=start)
+            rows.append(
+                {
+                    "policy": name,
+                    "trained_timestep_s": kw["timestep"],
+                    "physics": label,
+                    "episodes": episodes,
+                    "speed_rad_s": round(r["speed_rad_s"], 3),
+                    "speed_median_rad_s": round(r["speed_median_rad_s"], 3),
+                    "drops": int(round(r["drop_rate"] * episodes)),
+                }
+            )
+    return rows
+
+
 TRAIN_SETUPS = {  # name: (worker processes, pipelined rollouts)
     "PPO training (4x512, 16 envs in-process)": (0, False),
     "PPO training (4x512, 16 envs 2 worker processes)": (2, False),
@@ -299,45 +337,51 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     p = argparse.ArgumentParser(prog="python -m envs.bench", description=__doc__.split("\n\n")[0])
     p.add_argument("--steps", type=int, default=600, help="env steps per repeat")
     p.add_argument("--repeats", type=int, default=5, help="repeats per row (median reported)")
+    p.add_argument("--env", action=argparse.BooleanOptionalAction, default=True,
+                   help="measure the env rows (off: only the other parts)")  # fmt: skip
     p.add_argument("--train", action=argparse.BooleanOptionalAction, default=True,
                    help="also measure PPO training throughput")  # fmt: skip
     p.add_argument("--fidelity", action=argparse.BooleanOptionalAction, default=True,
                    help="also measure what coarser timesteps change")  # fmt: skip
+    p.add_argument("--transfer", action=argparse.BooleanOptionalAction, default=False,
+                   help="also evaluate policies trained at 2 and 2.5 ms under 1, 2, 2.5 ms "
+                        "physics (about 10 min)")  # fmt: skip
     p.add_argument("--train-rollouts", type=int, default=6,
                    help="rollouts (6,144 steps + update) per training setup")  # fmt: skip
     p.add_argument("--out", default="bench_out", help="directory for the CSV and PNG")
     a = p.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    ref = scripted_turn(2)
     rows: list[dict[str, object]] = []
-    base = None
-    rates = steps_per_second(range(1, len(ROWS) + 1), a.steps, a.repeats)
-    for level, name in enumerate(ROWS, start=1):
-        sps = rates[level]
-        med = float(np.median(sps))
-        base = base or med
-        turn = scripted_turn(level)
-        rows.append(
-            {
-                "config": name,
-                "env_steps_per_s": round(med, 1),
-                "min": round(min(sps), 1),
-                "max": round(max(sps), 1),
-                "ratio_to_landed": round(med / base, 2),
-                "yaw_diff_rad": round(float(np.median(np.abs(turn[:, 0] - ref[:, 0]))), 4),
-                "pos_diff_mm": round(
-                    float(np.median(np.linalg.norm(turn[:, 1:] - ref[:, 1:], axis=1))) * 1e3, 3
-                ),
-                "turn_yaw_rad": round(float(np.median(turn[:, 0])), 4),
-            }
-        )
-        r = rows[-1]
-        print(
-            f"{name:20s} {med:7.0f} env steps/s (x{r['ratio_to_landed']}), scripted turn: "
-            f"yaw {r['turn_yaw_rad']:+.3f} rad, vs row 2: {r['yaw_diff_rad']:.4f} rad, "
-            f"{r['pos_diff_mm']:.3f} mm"
-        )
+    if a.env:
+        ref = scripted_turn(2)
+        base = None
+        rates = steps_per_second(range(1, len(ROWS) + 1), a.steps, a.repeats)
+        for level, name in enumerate(ROWS, start=1):
+            sps = rates[level]
+            med = float(np.median(sps))
+            base = base or med
+            turn = scripted_turn(level)
+            rows.append(
+                {
+                    "config": name,
+                    "env_steps_per_s": round(med, 1),
+                    "min": round(min(sps), 1),
+                    "max": round(max(sps), 1),
+                    "ratio_to_landed": round(med / base, 2),
+                    "yaw_diff_rad": round(float(np.median(np.abs(turn[:, 0] - ref[:, 0]))), 4),
+                    "pos_diff_mm": round(
+                        float(np.median(np.linalg.norm(turn[:, 1:] - ref[:, 1:], axis=1))) * 1e3, 3
+                    ),
+                    "turn_yaw_rad": round(float(np.median(turn[:, 0])), 4),
+                }
+            )
+            r = rows[-1]
+            print(
+                f"{name:20s} {med:7.0f} env steps/s (x{r['ratio_to_landed']}), scripted turn: "
+                f"yaw {r['turn_yaw_rad']:+.3f} rad, vs row 2: {r['yaw_diff_rad']:.4f} rad, "
+                f"{r['pos_diff_mm']:.3f} mm"
+            )
     if a.train:
         rates = train_steps_per_second(a.train_rollouts)
         first = None
@@ -368,6 +412,19 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                 f"(p95 {r['yaw_rate_err_p95']:.3f}) rad/s, object {r['pos_err_mm_median']:.3f} mm, "
                 f"link force {r['force_err_median']:.3f} N"
             )
+    if a.transfer:
+        tr = timestep_transfer()
+        with (out / "four_finger_transfer.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(tr[0]))
+            w.writeheader()
+            w.writerows(tr)
+        for r in tr:
+            print(
+                f"{r['policy']:28s} under {r['physics']:12s}: {r['speed_rad_s']:.3f} rad/s "
+                f"(median {r['speed_median_rad_s']:.3f}), {r['drops']}/{r['episodes']} drops"
+            )
+    if not rows:
+        return rows
     thesis = round(THESIS_STEPS_PER_S)
     rows.append({"config": "thesis training (server)", "env_steps_per_s": thesis})
     fields = list(dict.fromkeys(k for r in rows for k in r))
@@ -388,7 +445,7 @@ def _plot(rows: list[dict[str, object]], path: Path) -> None:
 
     names = [str(r["config"]) for r in rows]
     vals = [float(r["env_steps_per_s"]) for r in rows]  # type: ignore[arg-type]
-    colors = ["C0"] * len(ROWS) + ["C1"] * (len(rows) - len(ROWS))
+    colors = ["C0" if r["config"] in ROWS else "C1" for r in rows]
     fig, ax = plt.subplots(figsize=(10, 5))
     ax.barh(names[::-1], vals[::-1], color=colors[::-1])
     for y, v in enumerate(vals[::-1]):

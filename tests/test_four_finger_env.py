@@ -515,6 +515,15 @@ def test_train_timestep_option_keeps_the_policy_period() -> None:
         parse_config(["--timestep", "0.003"])
     with pytest.raises(ValueError, match="divide"):
         env_physics(0.0)
+    # a run's physics travels with its policy (config.json); runs before the option: 2 ms
+    from train.gait import SHIPPED, load_policy
+
+    for name, physics in (
+        ("four_finger_sphere", (0.002, 25)),
+        ("four_finger_sphere_2.5ms", (0.0025, 20)),
+    ):
+        kw = load_policy(SHIPPED.parent / name)[1]
+        assert (kw["timestep"], kw["frame_skip"]) == physics
 
 
 def test_gait_period_of_a_periodic_signal() -> None:

@@ -16,6 +16,7 @@ import os
 import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -91,13 +92,17 @@ def evaluate(
     episodes: int,
     seconds: float,
     seed: int = 0,
+    start_grasps: Any = None,
 ) -> dict[str, float]:
     """Deterministic policy over ``episodes`` episodes of ``seconds`` from start grasps drawn
     with ``seed``: mean/median speed [rad/s] (turned angle / episode time; a drop ends an
-    episode) and drop rate."""
+    episode) and drop rate. ``start_grasps``: a :class:`envs.four_finger.GraspCache` to
+    start from instead of the env's own (the same start states under other physics)."""
     from envs.four_finger import FourFingerRotate
 
     env = FourFingerRotate(**env_kwargs)
+    if start_grasps is not None:
+        env.grasps = start_grasps
     n = int(round(seconds / env.dt))
     speeds, drops = [], []
     for ep in range(episodes):
