@@ -402,10 +402,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             print(f"{name}: {med:.0f} env steps/s including updates (x{ratio:.2f} in-process)")
     if a.fidelity:
         fid = timestep_fidelity()
-        with (out / "four_finger_fidelity.csv").open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(fid[0]))
-            w.writeheader()
-            w.writerows(fid)
+        _write_csv(out / "four_finger_fidelity.csv", fid)
         for r in fid:
             print(
                 f"{r['setting']:32s} yaw rate error {r['yaw_rate_err_median']:.3f} "
@@ -414,10 +411,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             )
     if a.transfer:
         tr = timestep_transfer()
-        with (out / "four_finger_transfer.csv").open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(tr[0]))
-            w.writeheader()
-            w.writerows(tr)
+        _write_csv(out / "four_finger_transfer.csv", tr)
         for r in tr:
             print(
                 f"{r['policy']:28s} under {r['physics']:12s}: {r['speed_rad_s']:.3f} rad/s "
@@ -427,14 +421,18 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
         return rows
     thesis = round(THESIS_STEPS_PER_S)
     rows.append({"config": "thesis training (server)", "env_steps_per_s": thesis})
-    fields = list(dict.fromkeys(k for r in rows for k in r))
-    with (out / "four_finger_env.csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        w.writerows(rows)
+    _write_csv(out / "four_finger_env.csv", rows)
     _plot(rows, out / "four_finger_env.png")
     print(f"wrote {out / 'four_finger_env.csv'} and {out / 'four_finger_env.png'}")
     return rows
+
+
+def _write_csv(path: Path, rows: list[dict[str, object]]) -> None:
+    """``rows`` as CSV, the columns the union of their keys in order of appearance."""
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in rows for k in r)))
+        w.writeheader()
+        w.writerows(rows)
 
 
 def _plot(rows: list[dict[str, object]], path: Path) -> None:
