@@ -79,13 +79,11 @@ friction cone with ``impratio`` 100 and no noslip pass (see the hand
 model's "Physics" note), solved by PGS instead of the model's Newton solver: the
 same convex problem, 5x cheaper to solve here, to a tolerance of 1e-6 (MuJoCo's 1e-8 costs
 about 15 % more for a 0.1 % change in the object's acceleration; README, "Four-finger
-rotation"). Two changes that leave the physics as it is (same contacts, parameters and motion
-to rounding; tested) save about 7 % of a step: the 34 contacts the scene's
-``contype``/``conaffinity`` allow (the object with the 8 links, palm and catch plane; links of
-different fingers) are explicit ``<pair>``s with the parameters MuJoCo would mix for them, so
-no broadphase runs, and the integrator is ``Euler``, which here computes what the model's
-``implicitfast`` does (joint damping, the only velocity-dependent force, is integrated
-implicitly by both).
+rotation"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the object with
+the 8 links, palm and catch plane; links of different fingers) are explicit ``<pair>``s with
+the parameters MuJoCo would mix for them, so that no broadphase runs: the same contacts in the
+same order with the same parameters, hence the same motion bit for bit (tested), in about 5 %
+less time per step.
 """
 
 from __future__ import annotations
@@ -191,9 +189,13 @@ def _dynamic_pairs(m: mujoco.MjModel) -> list[tuple[int, int]]:
 
     MuJoCo's filters (``mj_collision``): ``contype``/``conaffinity`` compatible, on bodies
     that are not welded together, not parent and child (the ``filterparent`` rule, which
-    spares the world body), and not excluded by ``<exclude>``."""
-    if m.npair:
-        raise FourFingerError("the scene has explicit <pair>s; the env expects none")
+    spares the world body, unless disabled), and not excluded by ``<exclude>``. Scenes with
+    explicit pairs or mocap bodies (which MuJoCo filters further) are refused."""
+    if m.npair or m.nmocap:
+        raise FourFingerError(
+            "the scene has explicit <pair>s or mocap bodies; the env expects none"
+        )
+    filterparent = not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_FILTERPARENT
     weld, parent = m.body_weldid, m.body_parentid
     excluded = {(int(b >> 16), int(b & 0xFFFF)) for b in m.exclude_signature}
     out = []
@@ -208,7 +210,7 @@ def _dynamic_pairs(m: mujoco.MjModel) -> list[tuple[int, int]]:
             w1, w2 = int(weld[b1]), int(weld[b2])
             if w1 == w2:
                 continue
-            if w1 and w2 and (w1 == int(weld[parent[w2]]) or w2 == int(weld[parent[w1]])):
+            if filterparent and w1 and w2 and (w1 == weld[parent[w2]] or w2 == weld[parent[w1]]):
                 continue
             if (min(b1, b2), max(b1, b2)) in excluded:
                 continue
@@ -228,11 +230,9 @@ def _load_model(
 
     ``explicit_pairs``: every contact the scene's ``contype``/``conaffinity`` allow becomes an
     explicit ``<pair>`` with the parameters MuJoCo would mix for it, and the geoms' own
-    collision bits are cleared, so that no broadphase runs; the integrator is ``Euler``, which
-    on this model (joint damping the only velocity-dependent force, integrated implicitly)
-    computes what the model's ``implicitfast`` does with less work. The same contacts, the
-    same parameters, the same trajectories to rounding (tested), about 7 % less time per
-    substep (README, "Throughput")."""
+    collision bits are cleared, so that no broadphase runs. The same contacts in the same
+    order with the same parameters, the same trajectories bit for bit (tested), about 5 % less
+    time per substep (README, "Throughput")."""
     if solver not in SOLVERS:
         raise FourFingerError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     spec = mujoco.MjSpec.from_file(str(ihm.scenes.scene_path(_scene(obj))))
@@ -254,7 +254,6 @@ def _load_model(
         geom_condim = model.geom_condim.copy()
         model = spec.compile()
         model.geom_condim[:] = geom_condim  # documents the skin; the pairs carry it
-        model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     model.opt.timestep = timestep
     model.opt.solver = SOLVERS[solver]
     model.opt.tolerance = SOLVER_TOLERANCE
@@ -473,7 +472,7 @@ def _cache_key(obj: str, gravity: bool, n: int, seed: int, timestep: float, fram
     h = hashlib.sha256()
     for path in (ihm.scenes.scene_path(_scene(obj)), ff.XML):
         h.update(Path(path).read_bytes())
-    settings = (gravity, n, seed, timestep, frame_skip, "pgs", SOLVER_TOLERANCE, "condim4", "pairs")
+    settings = (gravity, n, seed, timestep, frame_skip, "pgs", SOLVER_TOLERANCE, "condim4")
     settings += (mujoco.__version__,)
     h.update(repr(settings).encode())
     h.update(repr(_GENERATOR_VERSION).encode())
