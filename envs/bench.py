@@ -257,25 +257,28 @@ def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, obje
 
 
 TRANSFER_POLICIES = ("four_finger_sphere", "four_finger_sphere_2.5ms")  # in policies/
-TRANSFER_PHYSICS = (("1 ms x 50", 0.001, 50), ("2 ms x 25", 0.002, 25), ("2.5 ms x 20", 0.0025, 20))
+TRANSFER_TIMESTEPS = (0.001, 0.002, 0.0025)  # [s]; 0.05 s / timestep substeps each
 
 
 def timestep_transfer(episodes: int = 100, seconds: float = 20.0) -> list[dict[str, object]]:
     """Does a policy trained on coarser physics still work on finer physics? Each policy of
     :data:`TRANSFER_POLICIES` (its training timestep in its config.json), deterministic,
-    under each physics of :data:`TRANSFER_PHYSICS` (20 Hz policy in every case), over
+    under each timestep of :data:`TRANSFER_TIMESTEPS` (20 Hz policy in every case), over
     ``episodes`` episodes of ``seconds`` from the same start grasps (the shipped env's
     cache, 2 ms): mean and median speed [rad/s] and drops."""
     from train.gait import SHIPPED, evaluate, load_policy
+    from train.rotate import env_physics
 
     start = grasp_cache("sphere", True)
     rows = []
     for name in TRANSFER_POLICIES:
         act, kw = load_policy(SHIPPED.parent / name)
-        for label, timestep, frame_skip in TRANSFER_PHYSICS:
+        for timestep in TRANSFER_TIMESTEPS:
+            physics = env_physics(timestep)
+            label = f"{timestep * 1e3:g} ms x {physics['frame_skip']}"
             # n_grasps 1: the env's own start cache is not used (start_grasps)
-            physics = {"timestep": timestep, "frame_skip": frame_skip, "n_grasps": 1}
-            r = evaluate(act, {**kw, **physics}, episodes, seconds, start_grasps=start)
+            env_kw = {**kw, **physics, "n_grasps": 1}
+            r = evaluate(act, env_kw, episodes, seconds, start_grasps=start)
             rows.append(
                 {
                     "policy": name,

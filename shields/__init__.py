@@ -26,10 +26,10 @@ __all__ = [
     "ShieldResult",
     "SimpleShield",
     "SmartShield",
+    "linearize",
     "project_disc_box",
     "project_piece_box",
     "project_union_box",
     "simple_shield",
-    "linearize",
     "smart_shield",
 ]

@@ -16,9 +16,12 @@ import os
 import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from envs.four_finger import GraspCache
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "four_finger_sphere"
@@ -51,11 +54,12 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
+    from envs.four_finger import TIMESTEP
     from train.rotate import env_physics
 
     keys = {"object": "sphere", "gravity": True, "torsional": True}
     kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
-    return act, {**kwargs, **env_physics(cfg.get("timestep", 0.002))}
+    return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
 
 
 def rollout(
@@ -92,7 +96,7 @@ def evaluate(
     episodes: int,
     seconds: float,
     seed: int = 0,
-    start_grasps: Any = None,
+    start_grasps: GraspCache | None = None,
 ) -> dict[str, float]:
     """Deterministic policy over ``episodes`` episodes of ``seconds`` from start grasps drawn
     with ``seed``: mean/median speed [rad/s] (turned angle / episode time; a drop ends an
