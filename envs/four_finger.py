@@ -74,16 +74,16 @@ MuJoCo version.
 ``timestep`` 0.002 s, ``frame_skip`` 25 substeps per policy step (20 Hz, the
 thesis' policy rate); the hand model's own timestep is 0.001 s, and
 ``python -m envs.bench`` compares the two (the policy sees the same motion).
-Contacts with torsional friction (``condim`` 4, see ``torsional``). Elliptic
-friction cone with ``impratio`` 100 and no noslip pass (see the hand
-model's "Physics" note), solved by PGS instead of the model's Newton solver: the
-same convex problem, 5x cheaper to solve here, to a tolerance of 1e-4 (MuJoCo's 1e-8 takes
-about 60 % more iterations; the difference in one policy step is under 1 % of that step's
-own timestep error against converged physics; README, "Throughput"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the object with
-the 8 links, palm and catch plane; links of different fingers) are explicit ``<pair>``s with
-the parameters MuJoCo would mix for them, so that no broadphase runs: the same contacts in the
-same order with the same parameters, hence the same motion bit for bit (tested), in about 5 %
-less time per step.
+Contacts with torsional friction (``condim`` 4, see ``torsional``). Elliptic friction cone
+with ``impratio`` 100 and no noslip pass (see the hand model's "Physics" note), solved by PGS
+instead of the model's Newton solver: the same convex problem, 5x cheaper to solve here, to a
+tolerance of 1e-4 (``SOLVER_TOLERANCE``; MuJoCo's 1e-8 takes about 60 % more iterations, and
+one policy step differs from it by under 1 % of what halving the timestep changes: tested;
+README, "Throughput"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the
+object with the 8 links, palm and catch plane; links of different fingers) are explicit
+``<pair>``s with the parameters MuJoCo would mix for them, so that no broadphase runs: the
+same contacts in the same order with the same parameters, hence the same motion bit for bit
+(tested), in about 5 % less time per step.
 """
 
 from __future__ import annotations
