@@ -44,6 +44,9 @@ Compliance
   constant tangential force MuJoCo's contact creeps at ``v = R_t c_t / B`` instead of
   springing back. Over the prediction horizon ``h`` (the policy period) that is the
   compliance ``R_t h / B`` [m/N] (about 1.1e-5 m/N at ``h`` = 0.05 s, impratio 100).
+  That is the converged contact model; the env's PGS stops at tolerance 1e-4 and leaves a
+  residual in the creep of up to about 1e-4 m/s (median 2e-5, beside creeps of 7e-5 m/s
+  median at rest; tested).
   The torsional row creeps the same way: ``R_tau h / B`` [rad/(N m)] (0.43 here). Leaving
   it out (a point contact) doubles the prediction error on the four-finger grasps: the
   fingertip's twist about the contact normal is the abduction joint's rotation, and the

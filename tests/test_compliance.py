@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from envs.four_finger import FourFingerRotate
+from envs.four_finger import SOLVER_TOLERANCE, FourFingerRotate
 from ihm.contacts import grasp_from_mujoco
 from shields.compliance import ShieldError, linearize
 
@@ -48,10 +48,22 @@ def test_matches_grasp_from_mujoco(env_point: FourFingerRotate, grasp: int) -> N
     assert np.linalg.norm(w[:3]) < 0.02 * 9.81 * 0.1
 
 
-def test_contact_compliance_is_what_mujoco_simulates(env: FourFingerRotate) -> None:
+@pytest.mark.parametrize("tolerance", [1e-8, SOLVER_TOLERANCE])
+def test_contact_compliance_is_what_mujoco_simulates(
+    env: FourFingerRotate, tolerance: float
+) -> None:
     """The normal compliance equals MuJoCo's penetration per newton at rest, and MuJoCo's
-    spring constant is the one the skin's solref/solimp give."""
-    settled(env, 3, steps=6)
+    spring constant is the one the skin's solref/solimp give. The tangential creep
+    ``v = R_t c_t / B`` is the converged contact model's (to 2e-5 m/s at PGS tolerance 1e-8);
+    the env's PGS stops at ``SOLVER_TOLERANCE`` and leaves a residual in it of up to about
+    1e-4 m/s (median 2e-5 over 12 grasps, beside creeps of 7e-5 median; README,
+    "Throughput"), bounded here at 1.5e-4 m/s (7.5 um over a policy step)."""
+    env.model.opt.tolerance = tolerance
+    try:
+        settled(env, 3, steps=6)
+    finally:
+        env.model.opt.tolerance = SOLVER_TOLERANCE
+    creep_atol = 2e-5 if tolerance <= 1e-8 else 1.5e-4
     m, d = env.model, env.data
     lin = linearize(m, d)
     for k, i in enumerate(lin.contact_ids):
@@ -71,7 +83,7 @@ def test_contact_compliance_is_what_mujoco_simulates(env: FourFingerRotate) -> N
         # tangential creep at the rate R_t c_t / B: the compliance over the horizon
         v_t = -d.efc_vel[a + 1 : a + 3]
         f_t = d.efc_force[a + 1 : a + 3]
-        assert np.allclose(v_t, f_t * lin.C_contact[lin.nc * k + 1] / lin.horizon, atol=2e-5)
+        assert np.allclose(v_t, f_t * lin.C_contact[lin.nc * k + 1] / lin.horizon, atol=creep_atol)
     np.testing.assert_allclose(lin.C_joint, 1.0 / m.actuator_gainprm[:, 0])
 
 
