@@ -79,7 +79,8 @@ with ``impratio`` 100 and no noslip pass (see the hand model's "Physics" note), 
 instead of the model's Newton solver: the same convex problem, 5x cheaper to solve here, to a
 tolerance of 1e-4 (``SOLVER_TOLERANCE``; MuJoCo's 1e-8 takes about 60 % more iterations, and
 one policy step differs from it by under 1 % of what halving the timestep changes: tested;
-README, "Throughput"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the
+at rest it changes MuJoCo's creep of a held object by up to 1e-4 m/s per contact; README,
+"Throughput"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the
 object with the 8 links, palm and catch plane; links of different fingers) are explicit
 ``<pair>``s with the parameters MuJoCo would mix for them, so that no broadphase runs: the
 same contacts in the same order with the same parameters, hence the same motion bit for bit
