@@ -62,6 +62,7 @@ import numpy as np
 
 from envs.four_finger import (
     FRAME_SKIP,
+    SOLVERS,
     TIMESTEP,
     FourFingerRotate,
     _Physics,
@@ -189,6 +190,45 @@ FIDELITY = (  # label, timestep [s], substeps, solver, tolerance
 )
 
 
+STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
+
+
+def save_state(env: FourFingerRotate) -> np.ndarray:
+    """The env's full physics state and setpoints (:data:`STATE_SPEC`), for
+    :func:`policy_step_outcomes`."""
+    s = np.empty(mujoco.mj_stateSize(env.model, STATE_SPEC))
+    mujoco.mj_getState(env.model, env.data, s, STATE_SPEC)
+    return s
+
+
+def policy_step_outcomes(
+    env: FourFingerRotate,
+    states: Sequence[np.ndarray],
+    timestep: float,
+    substeps: int,
+    solver: str,
+    tol: float,
+) -> np.ndarray:
+    """One policy step (``substeps`` x ``timestep``, ``solver`` to tolerance ``tol``) from each
+    of ``states`` (:func:`save_state`), in ``env``'s model (its options are left so): per
+    state the object's yaw rate [rad/s], its position x, y, z [mm] and the observed link
+    normal forces (8) [N] at the end."""
+    m, d, ph = env.model, env.data, env._ph
+    m.opt.timestep, m.opt.tolerance = timestep, tol
+    m.opt.solver = SOLVERS[solver]
+    m.opt.iterations = 1000 if tol < 1e-10 else 100
+    out = []
+    for s in states:
+        mujoco.mj_setState(m, d, s, STATE_SPEC)
+        mujoco.mj_forward(m, d)
+        q0 = ph.object_quat().copy()
+        mujoco.mj_step(m, d, nstep=substeps)
+        _, fn, _ = ph.link_contacts()
+        rate = yaw_rate(q0, ph.object_quat(), timestep * substeps)
+        out.append([rate, *(ph.object_pos() * 1e3), *fn])
+    return np.array(out)
+
+
 def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, object]]:
     """What the policy sees under coarser physics: from states of the shipped policy's
     rollouts (every ``every``-th step of ``episodes`` episodes, with that step's action
@@ -201,8 +241,7 @@ def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, obje
 
     act, kw = load_policy(POLICY)
     env = FourFingerRotate(**kw)
-    m, d, ph = env.model, env.data, env._ph
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
+    d, ph = env.data, env._ph
     states = []
     for ep in range(episodes):
         obs, _ = env.reset(seed=ep)
@@ -212,35 +251,16 @@ def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, obje
                 ctrl0 = d.ctrl.copy()
                 step = np.clip(a, -1, 1) * env.max_setpoint_step
                 d.ctrl[:] = np.clip(d.ctrl + step, ph.ctrl_lo, ph.ctrl_hi)
-                s = np.empty(mujoco.mj_stateSize(m, spec))
-                mujoco.mj_getState(m, d, s, spec)
+                states.append(save_state(env))
                 d.ctrl[:] = ctrl0
-                states.append(s)
             obs, _, terminated, _, _ = env.step(a)
             if terminated:
                 break
 
-    def outcome(timestep: float, substeps: int, solver: str, tol: float) -> np.ndarray:
-        m.opt.timestep, m.opt.tolerance = timestep, tol
-        m.opt.solver = (
-            mujoco.mjtSolver.mjSOL_NEWTON if solver == "newton" else mujoco.mjtSolver.mjSOL_PGS
-        )
-        m.opt.iterations = 1000 if tol < 1e-10 else 100
-        out = []
-        for s in states:
-            mujoco.mj_setState(m, d, s, spec)
-            mujoco.mj_forward(m, d)
-            q0 = ph.object_quat().copy()
-            mujoco.mj_step(m, d, nstep=substeps)
-            _, fn, _ = ph.link_contacts()
-            rate = yaw_rate(q0, ph.object_quat(), timestep * substeps)
-            out.append([rate, *(ph.object_pos() * 1e3), *fn])
-        return np.array(out)
-
-    ref = outcome(0.0005, 100, "newton", 1e-12)
+    ref = policy_step_outcomes(env, states, 0.0005, 100, "newton", 1e-12)
     rows = []
     for label, *setting in FIDELITY:
-        e = outcome(*setting) - ref  # type: ignore[arg-type]
+        e = policy_step_outcomes(env, states, *setting) - ref  # type: ignore[arg-type]
         yaw, pos = np.abs(e[:, 0]), np.linalg.norm(e[:, 1:4], axis=1)
         force = np.abs(e[:, 4:]).max(axis=1)
         rows.append(

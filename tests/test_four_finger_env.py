@@ -272,9 +272,10 @@ def test_solver_tolerance_changes_nothing_the_policy_sees() -> None:
     changes (median and largest); 8 cached grasps held 10 s with zero actions end within
     0.01 rad (1e-3 rad/s of creep, 0.2 % of the rotation target) and 0.2 mm of the 1e-8
     hold. (1e-2 fails both, 1e-3 the first.)"""
+    from envs.bench import policy_step_outcomes, save_state
+
     e = FourFingerRotate()
     m, d, ph = e.model, e.data, e._ph
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
     rng = np.random.default_rng(3)
     states = []
     for ep in range(4):
@@ -282,23 +283,14 @@ def test_solver_tolerance_changes_nothing_the_policy_sees() -> None:
         for _ in range(12):
             e.step(rng.uniform(-1, 1, 12).astype(np.float32))
             d.ctrl[:] = np.clip(d.ctrl + rng.uniform(-0.05, 0.05, 12), ph.ctrl_lo, ph.ctrl_hi)
-            s = np.empty(mujoco.mj_stateSize(m, spec))
-            mujoco.mj_getState(m, d, s, spec)
-            states.append(s)
+            states.append(save_state(e))
 
     def policy_step(timestep: float, tol: float) -> np.ndarray:
-        m.opt.timestep, m.opt.tolerance = timestep, tol
-        out = []
-        for s in states:
-            mujoco.mj_setState(m, d, s, spec)
-            q0 = ph.object_quat().copy()
-            mujoco.mj_step(m, d, nstep=round(e.dt / timestep))
-            out.append([yaw_rate(q0, ph.object_quat(), e.dt), *ph.object_pos()])
-        return np.array(out)
+        return policy_step_outcomes(e, states, timestep, round(e.dt / timestep), "pgs", tol)
 
     shipped, exact = policy_step(TIMESTEP, SOLVER_TOLERANCE), policy_step(TIMESTEP, 1e-8)
     fine = policy_step(TIMESTEP / 2, 1e-8)
-    for cols in (slice(0, 1), slice(1, 4)):  # yaw rate [rad/s], position [m]
+    for cols in (slice(0, 1), slice(1, 4)):  # yaw rate [rad/s], position [mm]
         by_tol = np.linalg.norm(shipped[:, cols] - exact[:, cols], axis=1)
         by_dt = np.linalg.norm(fine[:, cols] - exact[:, cols], axis=1)
         assert np.median(by_tol) < 0.01 * np.median(by_dt), (np.median(by_tol), np.median(by_dt))
