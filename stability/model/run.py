@@ -108,7 +108,7 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
     if opts.backend == "scip" and res.status in ("infeasible", "infeasible_or_unbounded"):
         # SCIP's presolve has proved feasible models infeasible (barrett_cube's grasp read
         # from MuJoCo, a torque about x: "infeasible" in 0.0 s where the same MIP without
-        # presolve, and HiGHS, find the answer; tests/test_solver_regressions.py). An
+        # presolve, and HiGHS, find the answer; tests/stability/test_solver_regressions.py). An
         # infeasible round ends a query ("unstable"), so that claim is checked once more
         # without presolve; feasible answers need no second look (they are certified).
         problem.model.presolve = False

@@ -48,6 +48,7 @@ def motion_planes(grasp: Grasp) -> tuple[NDArray[np.float64], NDArray[np.float64
 
 
 def require_planar(grasp: Grasp) -> None:
+    """GraspError unless ``grasp`` is a :class:`~stability.Grasp`, MethodError unless planar."""
     if not isinstance(grasp, Grasp):
         raise GraspError(f"expected a stability.Grasp, got {type(grasp).__name__}")
     if not grasp.planar:
@@ -109,6 +110,7 @@ def count_slip_faces(grasp: Grasp) -> dict[str, int]:
 
 
 def preload_vector(grasp: Grasp, preload: Any) -> NDArray[np.float64]:
+    """The preload [N] per contact (a scalar for all; None: 0); GraspError if invalid."""
     return grasp.per_contact(preload, "preload")
 
 

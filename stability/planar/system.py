@@ -45,6 +45,10 @@ EPS = 1e-9  # relative tolerance of the state checks (geometry normalised to siz
 
 @dataclass
 class Context:
+    """What every state's equations share for one grasp, preload ``p`` and wrench
+    ``w0 + s d``: the motion planes ``T``, ``N``, the wrenches of unit contact forces, and
+    the absolute slack ``tol`` of the checks at ``s = 0``."""
+
     grasp: Grasp
     T: NDArray[np.float64]
     N: NDArray[np.float64]
@@ -485,6 +489,7 @@ def certified(ctx: Context, S, P, r, ct, s: float, rtol: float = 1e-7) -> bool:
 
 
 def state_names(S, P) -> NDArray[np.str_]:
+    """Per contact ``"detach"``, ``"roll"``, ``"slip+"`` or ``"slip-"`` of state ``(S, P)``."""
     return np.array(
         ["detach" if not pp else STATE_NAMES[(1, int(ss))] for ss, pp in zip(S, P, strict=True)]
     )
