@@ -39,9 +39,11 @@ def exact_conditions(eta: float) -> tuple[str, ...]:
 
 
 class CoulombModel:
-    """The exact model: ExactProblem (no friction polygon) plus the tangential motions
-    ``d_t`` (``self.dt``, (m, 2)) and slide bounds ``s`` (``self.slide``) as linear
-    variables; the nonlinear rows are added on SCIP's model by :meth:`scip_model`."""
+    """The exact model with Coulomb friction and maximum dissipation: ExactProblem (no
+    friction polygon) plus the tangential motions ``d_t`` (``self.dt``, (m, 2)) and slide
+    bounds ``s`` (``self.slide``) as linear variables; the nonlinear rows (circular cone,
+    ``|d_t| <= s``, ``c_t . d_t + mu c_n s <= 0``) are added on SCIP's model by
+    :meth:`scip_model`. Formerly ``ExactMdp`` (MDP: the maximum dissipation principle)."""
 
     def __init__(self, grasp: Grasp, data: QueryData, bounds: Any, eta: float,
                  motion_bound: float) -> None:  # fmt: skip

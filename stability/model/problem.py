@@ -1,8 +1,9 @@
 """The grasp model of thesis ch. 5 as one mixed-integer model, for every 3D method.
 
 :class:`ExactProblem` states thesis eqs. object_eq .. underactuation on a
-:class:`~stability.mip.MipModel`; the methods (``no_mdp``, ``iterative``, and the
-refinement of ch. 6) add their friction law and objective to it.
+:class:`~stability.mip.MipModel`; the methods (``no_mdp``, ``iterative``, the refinement
+of ch. 6 and ``exact``) add their friction law and objective to it. Called "exact" after
+the thesis: the model of ch. 5, before any method's approximation of friction.
 
 Variables (all in the grasp's units; springs have unit stiffness, so a virtual
 displacement is measured in newtons):
