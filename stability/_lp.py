@@ -1,4 +1,5 @@
-"""Small dense LPs through HiGHS, called directly (no modelling layer per call)."""
+"""Small dense LPs through HiGHS, called directly (no modelling layer per call), and
+:func:`quiet_highs`, the one way this package makes a HiGHS instance."""
 
 from __future__ import annotations
 
@@ -10,9 +11,27 @@ from numpy.typing import NDArray
 
 from .errors import SolverError
 
-__all__ = ["solve_lp", "LPResult", "INF"]
+__all__ = ["solve_lp", "LPResult", "INF", "quiet_highs"]
 
 INF = highspy.kHighsInf
+
+
+class _QuietHighs(highspy.Highs):
+    """``highspy.Highs`` with its log off before its first call: highspy's constructor calls
+    ``enableCallbacks``, and HiGHS prints its "Running HiGHS ... Copyright" banner on stdout
+    at the first call of an instance whose ``output_flag`` is still on (once per process)."""
+
+    def enableCallbacks(self) -> None:  # noqa: N802  (highspy's name)
+        self.setOptionValue("output_flag", False)
+        super().enableCallbacks()
+
+
+def quiet_highs() -> highspy.Highs:
+    """A new HiGHS instance that prints nothing (``output_flag`` off, set before any call
+    that could log); a caller that wants the log sets ``output_flag`` back on."""
+    h = _QuietHighs()
+    h.setOptionValue("output_flag", False)
+    return h
 
 
 class LPResult(NamedTuple):
@@ -61,8 +80,7 @@ def solve_lp(
     lp.a_matrix_.num_row_ = nrow
     if maximize:
         lp.sense_ = highspy.ObjSense.kMaximize
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
+    h = quiet_highs()
     h.setOptionValue("time_limit", float(time_limit_s))
     h.setOptionValue("primal_feasibility_tolerance", feas_tol)
     h.setOptionValue("dual_feasibility_tolerance", feas_tol)

@@ -1,12 +1,14 @@
 """One entry point, many methods: ``solve(grasp, query, method=...)``.
 
 Methods register themselves with :func:`register`, declaring which query types
-and grasp kinds they answer, like ``qpsolvers.solve_qp(..., solver=...)``.
+and grasp kinds they answer, like ``qpsolvers.solve_qp(..., solver=...)``. A renamed
+method keeps its old name as an alias that warns (:data:`RENAMED_METHODS`).
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,7 +18,7 @@ from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, OptimalCommands, Query
 from .solution import Solution
 
-__all__ = ["solve", "register", "available_methods", "MethodInfo"]
+__all__ = ["solve", "register", "available_methods", "method_info", "MethodInfo", "RENAMED_METHODS"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,9 @@ class MethodInfo:
 
 _METHODS: dict[str, MethodInfo] = {}
 
+# old method name -> new one: ``solve(..., method=old)`` still works, with a DeprecationWarning
+RENAMED_METHODS = {"spatial": "exact"}
+
 
 def register(
     name: str,
@@ -72,11 +77,22 @@ def available_methods(grasp: Grasp | None = None, query: Query | None = None) ->
     return sorted(n for n, info in _METHODS.items() if info.refuses(grasp, query) is None)
 
 
+def method_info(name: str) -> MethodInfo:
+    """The registered method ``name`` (what it answers, its solver function); MethodError if
+    none is registered under that name."""
+    info = _METHODS.get(name)
+    if info is None:
+        raise MethodError(f"unknown method {name!r}; registered: {sorted(_METHODS)}")
+    return info
+
+
 def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any) -> Solution:
     """Answer ``query`` about ``grasp`` with ``method``.
 
-    ``method=None`` picks ``"planar"`` for planar grasps. ``stats["time_s"]``
-    is the wall time of the method call [s].
+    ``method=None`` picks ``"planar"`` for planar grasps, ``"refinement"`` for spatial
+    ones; an old name of :data:`RENAMED_METHODS` (``"spatial"``, now ``"exact"``) still
+    works and emits a ``DeprecationWarning``. ``stats["time_s"]`` is the wall time of the
+    method call [s].
 
     Raises
     ------
@@ -95,6 +111,15 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
         )
     if method is None:
         method = "planar" if grasp.planar else "refinement"
+    if method in RENAMED_METHODS:
+        new = RENAMED_METHODS[method]
+        warnings.warn(
+            f"method {method!r} is deprecated: it is called {new!r} now "
+            f"(solve(..., method={new!r}))",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        method = new
     info = _METHODS.get(method)
     able = available_methods(grasp, query)
     if info is None:

@@ -1,462 +1,173 @@
-"""The exact problem of thesis ch. 5 as one mixed-integer model, for every 3D method.
+"""``method="exact"``: the exact nonconvex problem solved globally by SCIP's spatial
+branch-and-bound (the thesis' "future work" alternative to ch. 6; our accuracy reference).
+Formerly ``method="spatial"``, which still works and warns (``DeprecationWarning``).
 
-:class:`ExactProblem` states thesis eqs. object_eq .. underactuation on a
-:class:`~stability.mip.MipModel`; the methods (``no_mdp``, ``iterative``, and the
-refinement of ch. 6) add their friction law and objective to it.
+The exact model of ch. 5 (:class:`~stability.model.problem.ExactProblem`: unilateral springs with
+preload, nonbackdrivable actuators, object and hand equilibrium, the binaries ``y`` and
+``z``) with Coulomb friction and maximum dissipation stated *exactly* per contact ``i``,
+with no linearisation of the cone::
 
-Variables (all in the grasp's units; springs have unit stiffness, so a virtual
-displacement is measured in newtons):
+    |c_t|^2 <= mu^2 c_n^2                  (the circular cone; a second-order cone)
+    |d_t|^2 <= s_i^2,  s_i >= 0            (s_i bounds the tangential slide)
+    c_t . d_t + mu c_n s_i <= 0            (maximum dissipation; bilinear)
 
-* ``r`` object motion (``(x, y, theta)`` planar, ``(v, omega)`` spatial), free;
-* ``c`` contact forces in contact frames, ``c_n in [0, B]``, ``|c_t| <= mu B``;
-* ``u`` separation beyond the preload, ``u = c_n + d_n - p in [0, B]`` with
-  ``d = G^T r - J q`` (eq. rel_contact_motion);
-* ``y`` per contact (eq. binary_contact): ``y = 1`` (closed) ``=> u = 0``, so
-  ``c_n = p - d_n >= 0``; ``y = 0`` (open) ``=> c_n = 0``, so ``d_n >= p``. Together:
-  ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance with preload ``p``);
-* hands (``J`` given; ``R`` defaults to the identity): joint motion ``q`` (free),
-  actuator forces ``f in [f_c, f_c + E]``, transmission motion ``v = R^T (q - q_ref) in
-  [0, V]`` (eq. underac_nonbackdrive; ``q_ref = 0`` unless a preload state is given),
-  hand equilibrium ``J^T c = R f`` (eqs. hand_eq and torqueRatio in DESIGN.md's sign
-  convention: ``c`` acts on the object, ``-c`` on the hand), and per actuator (eq.
-  binary_actuator) ``z = 1`` (locked) ``=> v = 0``, ``z = 0`` (moving) ``=> f = f_c``.
+with ``d_t = G_t^T r - J_t q`` the tangential motion of the object at the contact. Since
+``c_t . d_t >= -|c_t| |d_t| >= -mu c_n |d_t| >= -mu c_n s_i``, the last row holds only with
+equality throughout: either ``c_n = 0`` (an open or unloaded contact, no friction), or
+``d_t = 0 = s_i`` (sticking, ``c_t`` anywhere in the cone), or ``|d_t| = s_i > 0``,
+``|c_t| = mu c_n`` and ``c_t`` opposite to ``d_t`` (sliding with maximum dissipation: thesis
+eq. mdp). SCIP handles the cones as convex and the bilinear row by spatial branching on
+``c_t, d_t, c_n, s`` with McCormick envelopes, so every variable there needs finite
+bounds: forces from :func:`~stability.model.problem.scale_bounds` (``|c_t| <= mu B``), tangential
+motions ``|d_t| <= motion_bound * 2 B`` (the same box as ``refinement``'s edge weights),
+translations within that, rotations within it over the grasp's size ``L`` and joint
+motions within it over their lever; an answer at the box is flagged ``stats["at_bound"]``.
 
-The bounds ``B, V, E`` are not arbitrary big-M constants: :func:`scale_bounds` derives
-them from the query's own force scale (the largest applied force or torque / size,
-preload, or contact force that balances a command), times ``bound_factor``. They are part
-of the model, the same for every backend: HiGHS uses them as big-M, SCIP as variable
-bounds beside its native indicators. An answer that reaches a bound is flagged
-(``at_bound``) so the factor can be raised; an infeasible model means "no equilibrium
-with forces and motions within the bounds", and the bounds are reported beside it.
+Queries: ``Existence``, ``MaxDisturbance`` (maximise ``s``), ``OptimalCommands`` (the
+objectives and limits of ``refinement``), all in one solve. Options: ``time_limit`` (a
+time-out returns ``status="timeout"`` with SCIP's incumbent and dual bound in
+``stats["incumbent"]``/``stats["dual_bound"]``), ``gap`` (relative optimality gap at which
+SCIP stops, default 1e-4), ``bound_factor``, ``verbose``, ``normal_uncertainty`` (eta: the
+spring law uses ``d_n cos eta + s_i sin eta``, the worst normal within eta, as
+``refinement`` does), ``motion_bound``, ``feastol`` (SCIP's feasibility tolerance, default
+its own 1e-6; 1e-9 made SoPlex ask for 1e-12). Backend: SCIP only (HiGHS has no nonlinear
+rows).
 
-Friction (eq. frictioncone): planar contacts get the exact interval ``|c_t| <= mu c_n``;
-spatial ones the polygon of ``edges`` sides inscribed in the cone (its vertices at
-``mu c_n (cos 2 pi j / edges, sin 2 pi j / edges)``; conservative: every force in it is in
-the cone), so with ``edges % 4 == 0`` the in-plane directions ``+-t1, +-t2`` keep their full
-``mu``.
+SCIP's point is then polished (:func:`stability.model.coulomb.polish`): with the binaries and
+each contact's mode fixed (sliding along ``u``, sticking, open) the exact problem is an LP,
+whose least-motion optimum replaces SCIP's point when it is no worse than the gap
+(``stats["polished"]``: ``"motion"``/``"force"``, where the slide direction came from, or
+False). Every answer is checked against the exact conditions (the linear model's, the
+cone and maximum dissipation) before it is returned: force conditions within
+``1e-6 (1 + B)``, dissipation within that times the motion's scale; anything worse is
+``status="error"``, never a silent wrong answer. This is global optimisation: exact up
+to SCIP's tolerances and the gap, and its time grows quickly with the number of contacts
+(``python -m stability.bench tradeoff``; README).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import time
+from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from .errors import GraspError
+from .api import register
+from .errors import GraspError, MethodError
 from .grasp import Grasp
-from .mip import INF, MipModel
+from .mip import MipResult, optimize_scip
+from .model.coulomb import CoulombModel, exact_conditions, polish
+from .model.problem import scale_bounds
+from .model.query import QueryData, add_query, query_value
+from .model.run import MipOptions, Stop, bounds_stats, solution, stopped
+from .queries import Existence, MaxDisturbance, OptimalCommands
+from .solution import Solution
 
-__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "clean_wrench",
-           "hand_data", "length_scale", "scale_bounds"]  # fmt: skip
+__all__: list[str] = []
 
-
-def length_scale(grasp: Grasp) -> float:
-    """The grasp's size ``L`` [m]: the largest contact distance from the object origin (1 if
-    all contacts sit at the origin). Torques divided by ``L`` are forces."""
-    L = float(np.max(np.linalg.norm(grasp.points, axis=1)))
-    return L if L > 0 else 1.0
-
-
-def hand_data(
-    grasp: Grasp, commands: ArrayLike | None
-) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-    """``(R, f_c)`` for a grasp with a hand (``R`` the identity when not given, ``f_c`` zeros
-    when no commands), None for a rigid fixture. Raises GraspError for commands that do not
-    fit: a rigid fixture, a wrong shape, NaN/inf."""
-    if grasp.J is None:
-        if commands is not None:
-            raise GraspError(
-                "commands given for a grasp without a hand: set J (and R) on the Grasp"
-            )
-        return None
-    R = np.eye(grasp.J.shape[1]) if grasp.R is None else np.asarray(grasp.R, dtype=float)
-    a = R.shape[1]
-    if commands is None:
-        return R, np.zeros(a)
-    return R, actuator_vector(commands, a, "commands")
+_EXACT_OPTIONS = ("normal_uncertainty", "motion_bound", "feastol", "gap")
 
 
-def actuator_vector(
-    value: ArrayLike | None, a: int, name: str, default: float = 0.0
-) -> NDArray[np.float64]:
-    """One finite number per actuator (a scalar is broadcast; None gives ``default``);
-    GraspError naming ``name`` otherwise."""
-    if value is None:
-        return np.full(a, float(default))
+@register(
+    "exact",
+    queries=(Existence, MaxDisturbance, OptimalCommands),
+    planar=False,
+    spatial=True,
+    hand=True,
+    summary="exact nonconvex problem (circular cone, bilinear maximum dissipation) solved "
+    "globally by SCIP's spatial branch-and-bound: the accuracy reference for small grasps",
+)
+def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
+    got = {k: options.pop(k) for k in list(options) if k in _EXACT_OPTIONS}
+    eta = float(got.get("normal_uncertainty", 0.0))
+    if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
+        raise GraspError(f"normal_uncertainty must be in [0, pi/2) rad, got {eta!r}")
+    motion_bound = float(got.get("motion_bound", 4.0))
+    if not (math.isfinite(motion_bound) and motion_bound >= 1.0):
+        raise GraspError(f"motion_bound must be a finite number >= 1, got {motion_bound!r}")
+    feastol = float(got.get("feastol", 1e-6))
+    if not (math.isfinite(feastol) and 0.0 < feastol <= 1e-3):
+        raise GraspError(f"feastol must be in (0, 1e-3], got {feastol!r}")
+    gap = float(got.get("gap", 1e-4))
+    if not (math.isfinite(gap) and 0.0 <= gap < 0.5):
+        raise GraspError(f"gap must be in [0, 0.5), got {gap!r}")
+    if options.get("backend") not in (None, "scip"):
+        raise MethodError(
+            f"method 'exact' needs SCIP's spatial branch-and-bound (backend='scip'), got "
+            f"backend={options['backend']!r}: HiGHS has no nonlinear constraints"
+        )
+    options["backend"] = "scip"
+    opts = MipOptions.of("exact", options)
+    if grasp.planar:
+        raise GraspError("method 'exact' takes spatial grasps; use 'planar' for planar ones")
+    data = QueryData.of(grasp, query, opts.bound_factor)
+    bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
+    stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": eta, "feastol": feastol}
+    bounds_stats(bounds, stats)
+    conditions = exact_conditions(eta)
+    t0 = time.perf_counter()
+    ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
+    var = add_query(ex.prob, data)
     try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GraspError(f"{name} must be numeric, got {value!r}") from exc
-    if arr.ndim == 0:
-        arr = np.full(a, float(arr))
-    if arr.shape != (a,):
-        raise GraspError(f"{name} must have shape ({a},) for {a} actuators, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise GraspError(f"{name} contain NaN or inf")
-    return arr
+        res = _run(ex, opts, feastol, gap, stats)
+    except Stop as e:
+        return stopped("exact", grasp, query, stats, e)
+    finally:
+        stats["solve_time_s"] = time.perf_counter() - t0
+    if res is None:
+        if data.direction is not None:
+            stats["capped"] = False
+        return solution("exact", grasp, query, False, stats, conditions=conditions)
+    pt = ex.prob.point(res)
+    M = ex.prob.model
+    motion = np.r_[ex.dt.reshape(-1), ex.prob.r, [] if ex.prob.q is None else ex.prob.q]
+    box = np.array([M.ub[int(j)] for j in motion])
+    pt.at_bound = pt.at_bound or bool(np.any(np.abs(res[motion.astype(int)]) >= 0.99 * box))
+    value = query_value(ex, pt, var, data)
+    if data.direction is not None:
+        stats["capped"] = value >= data.cap * (1 - 1e-8)
+    sol = solution("exact", grasp, query, True, stats, ex.prob, pt, value,
+                   conditions=conditions)  # fmt: skip
+    if data.command_range is not None:
+        sol.commands = pt.x[ex.prob.fc]
+    return sol
 
 
-@dataclass(frozen=True)
-class ExactBounds:
-    """Model bounds [N, or the transmission's units]: ``force`` ``B`` on normal forces and
-    on separations beyond the preload; ``motion`` ``V`` per actuator on ``R^T q``;
-    ``excess`` ``E`` per actuator on ``f - f_c``; ``scale`` the force scale they came from."""
-
-    force: float
-    motion: NDArray[np.float64]
-    excess: NDArray[np.float64]
-    scale: float
-
-
-def scale_bounds(
-    grasp: Grasp,
-    wrench_max: NDArray[np.float64],
-    preload: NDArray[np.float64],
-    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
-    bound_factor: float = 100.0,
-) -> ExactBounds:
-    """Bounds from the problem's own scale (see the module docstring).
-
-    ``S = max(|w_force|, |w_torque| / L, max p, max_j |(R f_c)_j| / |J_j|)`` with
-    ``wrench_max`` the largest wrench the query applies (``cap * direction`` for
-    MaxDisturbance) and ``|J_j|`` the norm of joint ``j``'s column (the contact force that
-    balances the commanded torque through that joint's lever). ``B = bound_factor * S``
-    (``S = 1`` N when nothing loads the grasp); contacts then move by at most ``2 B``, so
-    ``V_l = sum_j |R_jl| 2 B / min_j |J_j|``, and ``E = |R^+| |J^T| B (1 + max mu) sqrt(m)``.
-    The motions ``r`` and ``q`` stay unbounded (no indicator row holds them): each answer is
-    the least virtual motion among the optimal ones (:meth:`ExactProblem.tidy`).
-    """
-    if not (math.isfinite(bound_factor) and bound_factor >= 1.0):
-        raise GraspError(f"bound_factor must be a finite number >= 1, got {bound_factor!r}")
-    L = length_scale(grasp)
-    k = 2 if grasp.planar else 3
-    w = np.abs(wrench_max)
-    S = max(float(w[:k].max()), float(w[k:].max()) / L, float(np.max(preload, initial=0.0)))
-    if hand is not None:
-        R, fc = hand
-        cols = np.linalg.norm(grasp.J, axis=0)
-        live = cols > 1e-12 * max(1.0, float(cols.max(initial=0.0)))
-        if np.any(live):
-            S = max(S, float(np.max(np.abs(R @ fc)[live] / cols[live], initial=0.0)))
-    if S <= 0.0:
-        S = 1.0
-    B = bound_factor * S
-    if hand is None:
-        return ExactBounds(B, np.zeros(0), np.zeros(0), S)
-    lever = float(cols[live].min()) if np.any(live) else 1.0
-    motion = np.abs(R).sum(axis=0) * 2.0 * B / lever
-    motion = np.where(motion > 0, motion, 2.0 * B / lever)
-    c_norm = B * (1.0 + float(grasp.mu.max())) * math.sqrt(grasp.m)
-    jt = float(np.linalg.norm(grasp.J, 2))
-    rp = float(np.linalg.norm(np.linalg.pinv(R), 2)) if R.size else 0.0
-    excess = np.full(R.shape[1], max(rp * jt * c_norm, B))
-    return ExactBounds(B, motion, excess, S)
-
-
-CLEAN_RTOL = 1e-7
-
-
-def _clean(A: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``A`` with entries below ``CLEAN_RTOL max|A|`` (1e-7) set to 0: round-off of frames
-    and Jacobians read from a simulator (4e-17 normal components; 1e-9 m/rad out-of-plane
-    entries of the Barrett spread joint next to 0.12 m/rad), which a solver would otherwise
-    exploit, or which make its LPs numerically singular (SCIP: "error in LP solver" on
-    ``barrett_box``). A 1e-7 relative entry moves no answer beyond the solvers' tolerances."""
-    big = float(np.abs(A).max(initial=0.0))
-    return np.where(np.abs(A) > CLEAN_RTOL * big, A, 0.0)
-
-
-def clean_wrench(
-    w: NDArray[np.float64], scale: float, length: float, planar: bool
-) -> NDArray[np.float64]:
-    """``w`` with components below ``CLEAN_RTOL scale`` set to 0 (torques compared over the
-    grasp's size ``length``, as forces): the round-off of a wrench rotated into the object
-    frame (a box's weight read from a simulator carries 4e-10 N out of its plane), the
-    right-hand side's counterpart of :func:`_clean`. It matters where the grasp cannot
-    resist a load of one sign at all: a planar Barrett grasp takes an out-of-plane load
-    only through friction whose torque the nonbackdrivable spread joint must hold, which it
-    can for one sign only, so the exact problem flips from stable to unstable at zero load.
-    The solvers accept that 4e-10 N residual as zero (feasibility tolerance 1e-6), but
-    SCIP's infeasibility proofs use it exactly (a Farkas proof of a refinement round
-    multiplied it by 1.8e4 into a bound of 7.7e-6 N on a friction force, cutting off the
-    optimum; ``spatial`` proved the grasp unstable); zeroed, every method agrees."""
-    k = 2 if planar else 3
-    mag = np.abs(np.asarray(w, dtype=float))
-    mag = np.r_[mag[:k], mag[k:] / length]
-    return np.where(mag > CLEAN_RTOL * scale, w, 0.0)
-
-
-@dataclass
-class ExactPoint:
-    """One solution of the exact model, in the grasp's terms."""
-
-    forces: NDArray[np.float64]  # (m, k) [c_n, c_t...]
-    motion: NDArray[np.float64]  # r
-    hand_motion: NDArray[np.float64] | None  # q
-    actuator_forces: NDArray[np.float64] | None  # f
-    closed: NDArray[np.bool_]  # y
-    locked: NDArray[np.bool_] | None  # z
-    at_bound: bool
-    x: NDArray[np.float64]  # the model's solution vector
-
-
-class ExactProblem:
-    """The constraint set of thesis eqs. object_eq .. underactuation on a fresh
-    :class:`~stability.mip.MipModel` (``self.model``), object equilibrium left to the
-    caller (:meth:`add_object_equilibrium` or :meth:`add_net_wrench`).
-
-    Parameters
-    ----------
-    grasp : Grasp
-        Planar or spatial; a rigid fixture (``J is None``) or a hand (``J``, ``R``).
-    preload : (m,) array
-        Spring preloads ``p >= 0`` [N].
-    hand : (R, f_c) or None
-        From :func:`hand_data`.
-    bounds : ExactBounds
-        From :func:`scale_bounds`.
-    edges : int
-        Sides of the inscribed friction polygon (spatial contacts), ``>= 3``.
-    friction : bool
-        False leaves the tangential forces out of the cone (the caller states its own law,
-        e.g. the SOS2 relaxation of ch. 6); the variables exist either way.
-    hand_reference : (l,) array, optional
-        Joint motion ``q_ref`` at which the actuators lock: ``v = R^T (q - q_ref) >= 0``.
-        Default 0 (the thesis' one-shot model: commands and disturbance applied together).
-        A disturbance applied after a commanded preload uses the preload's ``q`` (a
-        nonbackdrivable transmission locks where the preload left it).
-    command_range : (lower, upper) arrays, optional
-        The commands are variables ``f_c`` (``self.fc``) in ``[lower, upper]`` instead of
-        ``hand[1]`` (query OptimalCommands): ``f - f_c in [0, E]`` and ``z = 0 => f = f_c``.
-    """
-
-    def __init__(
-        self,
-        grasp: Grasp,
-        preload: NDArray[np.float64],
-        hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
-        bounds: ExactBounds,
-        edges: int = 8,
-        friction: bool = True,
-        name: str = "exact",
-        hand_reference: NDArray[np.float64] | None = None,
-        command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-    ) -> None:
-        if not isinstance(edges, int | np.integer) or edges < 3:
-            raise GraspError(f"edges (friction polygon sides) must be an int >= 3, got {edges!r}")
-        self.grasp, self.preload, self.hand, self.bounds = grasp, preload, hand, bounds
-        self.edges = int(edges)
-        g, m, k, B = grasp, grasp.m, grasp.dim, bounds.force
-        M = self.model = MipModel(name)
-        self.r = M.add_vars(g.wrench_dim, -INF, INF, "C", "r")
-        lo = np.stack([np.zeros(m)] + [-g.mu * B] * (k - 1), axis=1).reshape(-1)
-        hi = np.stack([np.full(m, B)] + [g.mu * B] * (k - 1), axis=1).reshape(-1)
-        self.c = M.add_vars(m * k, lo, hi, "C", "c").reshape(m, k)
-        self.u = M.add_vars(m, 0.0, B, "C", "u")
-        self.y = M.add_vars(m, 0, 1, "B", "y")
-        self.q = self.f = self.v = self.z = self.hand_reference = self.fc = None
-        self.spring_rows: list[int] = []
-        self.G = _clean(g.G)  # (wrench_dim, k m), round-off entries zeroed
-        Gt = self.G.T.reshape(m, k, -1)
-        self.J = None if g.J is None else _clean(g.J)
-        Jn = None if g.J is None else self.J.reshape(m, k, -1)[:, 0, :]
-        if hand is not None:
-            R, fc = hand
-            nl, na = R.shape
-            self.q = M.add_vars(nl, -INF, INF, "C", "q")
-            if command_range is None:
-                self.f = M.add_vars(na, fc, fc + bounds.excess, "C", "f")
-            else:
-                lo_c, hi_c = command_range
-                self.fc = M.add_vars(na, lo_c, hi_c, "C", "fc")
-                self.f = M.add_vars(na, lo_c, hi_c + bounds.excess, "C", "f")
-                for a in range(na):  # 0 <= f - f_c <= E
-                    M.add_row([self.f[a], self.fc[a]], [1.0, -1.0], 0.0, float(bounds.excess[a]),
-                              f"excess{a}")  # fmt: skip
-            self.v = M.add_vars(na, 0.0, bounds.motion, "C", "v")
-            self.z = M.add_vars(na, 0, 1, "B", "z")
-        for i in range(m):
-            # c_n + d_n - u = p, d_n = G_n^T r - J_n q
-            idx, val = [self.c[i, 0], self.u[i]], [1.0, -1.0]
-            idx, val = self._extend(idx, val, self.r, Gt[i, 0])
-            if Jn is not None:
-                idx, val = self._extend(idx, val, self.q, -Jn[i])
-            self.spring_rows.append(M.add_constraint(idx, val, "==", float(preload[i]),
-                                                     f"spring{i}"))  # fmt: skip
-            M.add_indicator(self.y[i], [self.u[i]], [1.0], "<=", 0.0, 1, f"closed{i}")
-            M.add_indicator(self.y[i], [self.c[i, 0]], [1.0], "<=", 0.0, 0, f"open{i}")
-        if friction:
-            self._friction_polygon()
-        if hand is not None:
-            R, fc = hand
-            for j in range(R.shape[0]):  # J^T c - R f = 0
-                idx, val = self._extend([], [], self.c.reshape(-1), self.J[:, j])
-                idx, val = self._extend(idx, val, self.f, -R[j])
-                M.add_constraint(idx, val, "==", 0.0, f"hand{j}")
-            ref = np.zeros(R.shape[1]) if hand_reference is None else R.T @ hand_reference
-            self.hand_reference = hand_reference
-            for a in range(R.shape[1]):  # R^T q - v = R^T q_ref
-                idx, val = self._extend([self.v[a]], [-1.0], self.q, R[:, a])
-                M.add_constraint(idx, val, "==", float(ref[a]), f"transmission{a}")
-                M.add_indicator(self.z[a], [self.v[a]], [1.0], "<=", 0.0, 1, f"locked{a}")
-                if self.fc is None:
-                    M.add_indicator(self.z[a], [self.f[a]], [1.0], "<=", float(fc[a]), 0,
-                                    f"moving{a}")  # fmt: skip
-                else:
-                    M.add_indicator(self.z[a], [self.f[a], self.fc[a]], [1.0, -1.0], "<=", 0.0,
-                                    0, f"moving{a}")  # fmt: skip
-        self.n_base = M.n_vars  # the variables above, the same for the same arguments
-
-    @staticmethod
-    def _extend(idx, val, var, coef) -> tuple[list, list]:
-        coef = np.asarray(coef, dtype=float)
-        nz = np.flatnonzero(coef)
-        return list(idx) + [int(var[j]) for j in nz], list(val) + coef[nz].tolist()
-
-    def _friction_polygon(self) -> None:
-        g, M = self.grasp, self.model
-        for i in range(g.m):
-            mu = float(g.mu[i])
-            if g.planar:
-                dirs = np.array([[1.0], [-1.0]])
-                rhs = mu
-            else:
-                th = 2 * np.pi * (np.arange(self.edges) + 0.5) / self.edges
-                dirs = np.stack([np.cos(th), np.sin(th)], axis=1)
-                rhs = mu * math.cos(math.pi / self.edges)
-            for e, dvec in enumerate(dirs):  # dvec . c_t - rhs c_n <= 0
-                idx = [int(self.c[i, 0])] + [int(x) for x in self.c[i, 1:]]
-                M.add_constraint(idx, [-rhs, *dvec.tolist()], "<=", 0.0, f"cone{i}.{e}")
-
-    # ------------------------------------------------------------------ object wrench
-
-    def add_object_equilibrium(
-        self, wrench: NDArray[np.float64], direction: NDArray[np.float64] | None = None,
-        cap: float = 0.0,
-    ) -> int | None:  # fmt: skip
-        """``G c + wrench + s direction = 0`` (eq. object_eq); with ``direction`` a new
-        variable ``s in [0, cap]`` (its index is returned), else None. Round-off in
-        ``wrench`` and ``direction`` is zeroed first (:func:`clean_wrench`)."""
-        M, G = self.model, self.G
-        wrench = self._clean_wrench(wrench)
-        if direction is not None:
-            direction = self._clean_wrench(direction, own=True)
-        s = None if direction is None else M.add_var(0.0, cap, "C", "s")
-        for row in range(G.shape[0]):
-            idx, val = self._extend([], [], self.c.reshape(-1), G[row])
-            if s is not None and direction[row] != 0:
-                idx, val = idx + [s], val + [float(direction[row])]
-            M.add_constraint(idx, val, "==", -float(wrench[row]), f"object{row}")
-        return s
-
-    def _clean_wrench(self, w: NDArray[np.float64], own: bool = False) -> NDArray[np.float64]:
-        """:func:`clean_wrench` at the problem's force scale (``own``: at ``w``'s own, for a
-        direction, whose length is arbitrary)."""
-        g = self.grasp
-        L = length_scale(g)
-        w = np.asarray(w, dtype=float)
-        scale = self.bounds.scale
-        if own:
-            k = 2 if g.planar else 3
-            scale = max(float(np.abs(w[:k]).max()), float(np.abs(w[k:]).max()) / L)
-        return clean_wrench(w, scale, L, g.planar)
-
-    def add_net_wrench(self, wrench: NDArray[np.float64], weights: NDArray[np.float64]) -> None:
-        """Object equilibrium dropped (thesis sec. iterative): the net wrench
-        ``G c + wrench = e+ - e-`` is free and the objective is ``sum weights (e+ + e-)``, its
-        weighted 1-norm."""
-        M, G = self.model, self.G
-        wrench = self._clean_wrench(wrench)
-        ep = M.add_vars(G.shape[0], 0.0, INF, "C", "e+")
-        em = M.add_vars(G.shape[0], 0.0, INF, "C", "e-")
-        for row in range(G.shape[0]):
-            idx, val = self._extend([ep[row], em[row]], [-1.0, 1.0], self.c.reshape(-1), G[row])
-            M.add_constraint(idx, val, "==", -float(wrench[row]), f"net{row}")
-        M.set_objective(np.concatenate([ep, em]), np.concatenate([weights, weights]))
-
-    def add_motion_ray(
-        self, start: NDArray[np.float64], direction: NDArray[np.float64], gamma: float
-    ) -> int:
-        """``r = start + s direction`` with ``0 <= s <= gamma`` (eq. movement); returns s."""
-        M = self.model
-        s = M.add_var(0.0, gamma, "C", "step")
-        for j in range(len(start)):
-            idx, val = [int(self.r[j])], [1.0]
-            if direction[j] != 0:
-                idx, val = idx + [s], val + [-float(direction[j])]
-            M.add_constraint(idx, val, "==", float(start[j]), f"ray{j}")
-        return s
-
-    # ------------------------------------------------------------------ answers
-
-    def tidy(
-        self, x: NDArray[np.float64], rtol: float = 1e-10, lp: MipModel | None = None
-    ) -> NDArray[np.float64] | None:
-        """The least-motion point with ``x``'s binaries and objective value: the LP of
-        :meth:`MipModel.fixed` plus ``objective within rtol of x's``, minimising the weighted
-        1-norm of the virtual motion (translations, rotations times ``L``, joint motions
-        times their lever ``|J_j|``: all in contact-displacement units). Motions that load no
-        spring are otherwise arbitrary, and a simplex vertex can put them anywhere. None if
-        the LP fails (the caller keeps ``x``). ``lp``: a fixed LP of this model's variables
-        to use instead (e.g. with more rows: ``spatial`` fixes slide directions), copied."""
-        from .mip import solve as mip_solve
-
-        lp = self.model.fixed(x) if lp is None else lp.fixed(x)
-        obj = self.model.objective
-        nz = np.flatnonzero(obj)
-        if nz.size:
-            val = float(obj @ x[: obj.size])
-            slack = rtol * max(1.0, abs(val))
-            if self.model.maximize:
-                lp.add_row(nz, obj[nz], val - slack, INF, "objective")
-            else:
-                lp.add_row(nz, obj[nz], -INF, val + slack, "objective")
-        g = self.grasp
-        kk = 2 if g.planar else 3
-        L = length_scale(g)
-        wr = np.r_[np.ones(kk), np.full(g.wrench_dim - kk, L)]
-        motion, weight = list(self.r), list(wr)
-        if self.q is not None:
-            cols = np.linalg.norm(self.J, axis=0)
-            motion += list(self.q)
-            weight += list(np.where(cols > 0, cols, 1.0))
-        idx, val = [], []
-        for j, w in zip(motion, weight, strict=True):
-            t = lp.add_var(0.0, INF, "C", f"|{lp.var_names[j]}|")  # t >= |x_j|
-            lp.add_row([t, j], [1.0, -1.0], 0.0, INF)
-            lp.add_row([t, j], [1.0, 1.0], 0.0, INF)
-            idx.append(t)
-            val.append(float(w))
-        lp.set_objective(idx, val)
-        res = mip_solve(lp, backend="highs", polish=False)
-        if res.status != "optimal" or res.x is None:
-            return None
-        return res.x[: self.model.n_vars]
-
-    def point(self, x: NDArray[np.float64]) -> ExactPoint:
-        """The grasp quantities of a model solution ``x``."""
-        B = self.bounds.force
-        c = x[self.c]
-        at = bool(np.any(c[:, 0] >= 0.99 * B) or np.any(x[self.u] >= 0.99 * B))
-
-        q = f = z = None
-        if self.hand is not None:
-            q, f, z = x[self.q], x[self.f], np.round(x[self.z]) == 1
-            fc = self.hand[1] if self.fc is None else x[self.fc]
-            at = at or bool(np.any(x[self.v] >= 0.99 * self.bounds.motion))
-            at = at or bool(np.any(f - fc >= 0.99 * self.bounds.excess))
-        return ExactPoint(c, x[self.r], q, f, np.round(x[self.y]) == 1, z, at, x)
-
-    def states(self, pt: ExactPoint, tol: float = 1e-9) -> NDArray[np.str_]:
-        """Per contact: ``"detach"`` (open), ``"stick"`` (closed, no tangential motion) or
-        ``"slip"`` (closed, ``|d_t| > tol (1 + |d|)``)."""
-        g = self.grasp
-        d = g.G.T @ pt.motion
-        if g.J is not None and pt.hand_motion is not None:
-            d = d - g.J @ pt.hand_motion
-        d = d.reshape(g.m, g.dim)
-        slide = np.linalg.norm(d[:, 1:], axis=1) > tol * (1.0 + np.abs(d).max(initial=0.0))
-        out = np.where(slide, "slip", "stick")
-        return np.where(pt.closed, out, "detach")
+def _run(ex: CoulombModel, opts: MipOptions, feastol: float, gap: float,
+         stats: dict[str, Any]) -> NDArray[np.float64] | None:  # fmt: skip
+    """Solve; the point (None: infeasible), :class:`Stop` on a time-out or an error."""
+    t0 = time.perf_counter()
+    try:
+        m, x = ex.scip_model(opts.time_limit, opts.verbose, feastol, gap)
+        m.setParam("limits/absgap", 1e-9)  # gap is relative: small answers need it so
+        raw = optimize_scip(m, x, ex.prob.model, t0)
+    except Exception as e:  # noqa: BLE001  (a solver's internal failure is a status)
+        raise Stop("error", f"scip failed: {type(e).__name__}: {e}") from None
+    res = MipResult(raw["status"], "scip", raw["x"], raw["objective"], raw["bound"],
+                    raw["time_s"], raw["nodes"], raw["message"])  # fmt: skip
+    stats["mips"] = 1
+    stats["mip_time_s"] = res.time_s
+    stats["nodes"] = res.nodes
+    stats["dual_bound"] = res.bound
+    if res.status in ("infeasible", "infeasible_or_unbounded"):
+        return None
+    if res.status == "timeout":
+        stats["incumbent"] = res.objective
+        raise Stop("timeout", f"time_limit {opts.time_limit} s reached ({res.message}; "
+                   f"incumbent {res.objective}, dual bound {res.bound})")  # fmt: skip
+    if res.status == "optimal" and res.x is not None:
+        x = polish(ex, res.x, gap, stats)
+        viol = ex.violations(x)
+        stats["violations"] = viol
+        # force conditions within 1e-6 of the force bound; dissipation (force x motion)
+        # within that times the motion's scale
+        B = ex.prob.bounds.force
+        dmax = 1.0 + float(np.abs(x[ex.dt]).max(initial=0.0))
+        lim = {k: 1e-6 * (1.0 + B) * (dmax if k == "dissipation" else 1.0) for k in viol}
+        bad = {k: v for k, v in viol.items() if v > lim[k]}
+        if bad:
+            raise Stop("error", f"SCIP's answer fails the exact conditions {bad}")
+        return x
+    raise Stop("error", f"scip: {res.status}: {res.message}")

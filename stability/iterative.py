@@ -2,7 +2,7 @@
 
 Object equilibrium is dropped; instead each step solves the *movement constrained
 existence problem* (thesis Algorithm iterative): the exact model
-(:class:`~stability.exact.ExactProblem`: springs, nonbackdrivable actuators, friction cone)
+(:class:`~stability.model.problem.ExactProblem`: springs, nonbackdrivable actuators, friction cone)
 with the object's motion restricted to a ray along the previous net wrench,
 
     r^k = r^{k-1} + s M^{-1} w^{k-1},   0 <= s <= gamma            (eq. movement)
@@ -12,7 +12,7 @@ size ``L``, so a MILP). The outer loop (Algorithm loop) starts at ``r^0``, ``w^0
 stops once ``|w^{k-1} - w^k| < epsilon S``; the grasp is stable when the converged net
 wrench is below ``net_tol S``, with ``S`` the load's force scale (the largest applied force
 or torque / ``L``, preload, or contact force of a command; see
-:func:`~stability.exact.scale_bounds`): ``net_tol = 1e-3`` is the thesis' 1e-3 N for its
+:func:`~stability.model.problem.scale_bounds`): ``net_tol = 1e-3`` is the thesis' 1e-3 N for its
 loads of about 1 N, made relative so that a small load is not "held" by no force at all. An
 iteration cap reached first is the status ``"not_converged"`` with ``stable=None``, never a
 guess.
@@ -35,13 +35,13 @@ turns a grasp of size ``L`` by about ``tau / L^2``), and ``L = 1`` gives the the
 exactly (option ``length_scale``). ``s = 1`` fully loads a single spring; each step picks
 the best ``s`` on its ray, so ``gamma`` (default 10) only caps how far: on ``barrett_box``
 ``gamma = 1`` needs 83 steps where 10 needs 19, for the same answers. Model bounds
-(:func:`~stability.exact.scale_bounds`) follow each applied wrench, so a bisection probe at
+(:func:`~stability.model.problem.scale_bounds`) follow each applied wrench, so a bisection probe at
 a small ``s`` is not solved with the big-M of ``cap``.
 
 The scheme has no convergence guarantee (thesis) and is not the exact problem's answer: it
 approximates maximum dissipation by letting the object move only where it is pushed. It is
 right where ``no_mdp`` is wrong (the wedge) and agrees with the exact planar solver on the
-thesis' table; see ``tests/test_mip_methods.py``.
+thesis' table; see ``tests/stability/test_no_mdp_iterative.py``.
 """
 
 from __future__ import annotations
@@ -52,11 +52,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._mipcommon import MipOptions, QueryData, Stop, bounds_stats, run, solution, stopped
 from .api import register
 from .errors import GraspError
-from .exact import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
 from .grasp import Grasp
+from .model.problem import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
+from .model.query import QueryData
+from .model.run import MipOptions, Stop, bounds_stats, run, solution, stopped
 from .queries import Existence, MaxDisturbance
 from .solution import Solution
 

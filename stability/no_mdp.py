@@ -2,14 +2,14 @@
 
 Thesis sec. 3dfriction, the "cautionary formulation": drop the maximum dissipation
 principle (eq. mdp) and keep only the cone (eq. frictioncone), and the problem is one MIP
-(:class:`~stability.exact.ExactProblem` plus object equilibrium ``G c + w = 0``). It is
+(:class:`~stability.model.problem.ExactProblem` plus object equilibrium ``G c + w = 0``). It is
 wrong: an unloaded object can "wedge" itself by a virtual rotation that compresses springs
 while the applied force does no work, and friction then "holds" it (thesis Fig. twist:
-energy is created). It exists to be shown wrong; see ``tests/test_mip_methods.py``.
+energy is created). It exists to be shown wrong; see ``tests/stability/test_no_mdp_iterative.py``.
 
 ``Existence``: is the MIP feasible? ``MaxDisturbance``: maximise ``s in [0, cap]`` with
-``w = s d``. Options: :class:`stability._mipcommon.MipOptions`. The model's force bound
-(:func:`~stability.exact.scale_bounds`) can decide an answer (a wedge with a tiny angle
+``w = s d``. Options: :class:`stability.model.run.MipOptions`. The model's force bound
+(:func:`~stability.model.problem.scale_bounds`) can decide an answer (a wedge with a tiny angle
 needs forces far above the load); so an infeasible model, or an answer at a bound, is
 solved once more with a 100x larger bound (``stats["retried_bound_factor"]``), and an
 answer still at a bound says so (``stats["at_bound"]``: the value is then a lower bound
@@ -20,10 +20,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from ._mipcommon import MipOptions, QueryData, Stop, bounds_stats, run, solution, stopped
 from .api import register
-from .exact import ExactProblem, scale_bounds
 from .grasp import Grasp
+from .model.problem import ExactProblem, scale_bounds
+from .model.query import QueryData
+from .model.run import MipOptions, Stop, bounds_stats, run, solution, stopped
 from .queries import Existence, MaxDisturbance
 from .solution import Solution
 

@@ -60,7 +60,7 @@ or ``weights . f_c``; per-actuator ``lower``/``upper``; ``max_normal_force``).
 Certificates (``certify=True``, default): after each round the answer's contact modes
 (open; sliding along its motion; friction on the cone's boundary; sticking) are fixed and
 the *exact* problem (circular cone, maximum dissipation) becomes one LP
-(:func:`stability._exactmdp.certify`); a point of it is an exact solution. ``Existence``
+(:func:`stability.model.coulomb.certify`); a point of it is an exact solution. ``Existence``
 returns it at once (stable). ``MaxDisturbance`` / ``OptimalCommands`` return it when its
 value meets the relaxation's bound within ``certify_gap`` (default 1e-6): the exact
 optimum lies between the two. Otherwise the loop goes on and the best certified value is
@@ -78,26 +78,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._exactmdp import QueryModel, add_query, certify, exact_conditions, query_value
-from ._mipcommon import (
-    CONDITIONS,
-    MipOptions,
-    Stop,
-    bounds_stats,
-    run,
-    solution,
-    stopped,
-)
 from .api import register
 from .errors import GraspError
-from .exact import (
-    ExactBounds,
-    ExactPoint,
-    ExactProblem,
-    scale_bounds,
-)
 from .grasp import Grasp
 from .mip import INF
+from .mip.model import Row
+from .model.coulomb import certify, exact_conditions
+from .model.problem import ExactBounds, ExactPoint, ExactProblem, scale_bounds
+from .model.query import QueryData, add_query, query_value
+from .model.run import CONDITIONS, MipOptions, Stop, bounds_stats, run, solution, stopped
 from .queries import Existence, MaxDisturbance, OptimalCommands
 from .solution import Solution
 
@@ -266,7 +255,7 @@ class _Relaxation:
     def __init__(
         self,
         grasp: Grasp,
-        data: QueryModel,
+        data: QueryData,
         bounds: ExactBounds,
         edges: list[EdgeSet],
         eta: float,
@@ -312,9 +301,9 @@ class _Relaxation:
                 M.add_row([int(prob.c[i, 1 + t]), *beta], [1.0, *(-coef)], 0.0, 0.0)
                 # sum alpha_s l_s e_s + d_t = 0,  d_t = G_t^T r - J_t q
                 idx, val = list(alpha), list(coef)
-                idx, val = prob._extend(idx, val, prob.r, Gt[i, 1 + t])
+                idx, val = prob.extend(idx, val, prob.r, Gt[i, 1 + t])
                 if Jt is not None:
-                    idx, val = prob._extend(idx, val, prob.q, -Jt[i, 1 + t])
+                    idx, val = prob.extend(idx, val, prob.q, -Jt[i, 1 + t])
                 M.add_row(idx, val, 0.0, 0.0, f"slide{i}.{t}")
             cn = int(prob.c[i, 0])
             M.add_row([*beta, cn], [1.0] * k + [-mu], -INF, 0.0, f"outer{i}")
@@ -323,8 +312,6 @@ class _Relaxation:
             self.alpha.append(alpha)
             self.beta.append(beta)
         if eta > 0.0:  # d_n' = d_n cos(eta) + sin(eta) sum alpha (eq. uncertainty, unloading)
-            from .mip.model import Row
-
             for i, r in enumerate(prob.spring_rows):
                 row = M.rows[r]
                 cols = set(prob.r.tolist()) | (set() if prob.q is None else set(prob.q.tolist()))
@@ -374,7 +361,7 @@ class _Relaxation:
 
 
 def _round(
-    grasp: Grasp, data: QueryModel, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
+    grasp: Grasp, data: QueryData, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
     opts: MipOptions, stats: dict[str, Any],
 ) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
@@ -389,7 +376,7 @@ def _round(
 def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     ro = _Opts.pop(options)
     opts = MipOptions.of(method, options)
-    data = QueryModel.of(grasp, query, opts.bound_factor)
+    data = QueryData.of(grasp, query, opts.bound_factor)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": opts.backend, "initial_edges": ro.initial_edges,
                              "levels": ro.levels, "equivalent_edges": ro.equivalent_edges,
@@ -461,13 +448,13 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     return sol
 
 
-def _better(a: float | None, b: float | None, data: QueryModel) -> bool:
+def _better(a: float | None, b: float | None, data: QueryData) -> bool:
     if a is None or b is None:
         return False
     return a > b if data.direction is not None else a < b
 
 
-def _closed(exact: float | None, relaxed: float | None, data: QueryModel, gap: float) -> bool:
+def _closed(exact: float | None, relaxed: float | None, data: QueryData, gap: float) -> bool:
     """The certified exact value meets the relaxation's bound within ``gap`` (Existence:
     any certificate closes)."""
     if exact is None or relaxed is None:
@@ -478,7 +465,7 @@ def _closed(exact: float | None, relaxed: float | None, data: QueryModel, gap: f
 
 
 def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
-               trace: list, ro: _Opts, data: QueryModel, cap0: float) -> Solution:  # fmt: skip
+               trace: list, ro: _Opts, data: QueryData, cap0: float) -> Solution:  # fmt: skip
     """The Solution of a certified exact point (module docstring, "Certificates")."""
     ex, pt, value = best
     stats["certified"] = True

@@ -26,6 +26,7 @@ import importlib.util
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,7 +35,7 @@ from ..errors import MethodError, ModelError
 from .model import INF, MipModel
 
 __all__ = ["BACKENDS", "DEFAULT_BACKEND", "INF", "MipModel", "MipResult", "available_backends",
-           "check_backend", "solve"]  # fmt: skip
+           "build_scip", "check_backend", "optimize_scip", "solve"]  # fmt: skip
 
 BACKENDS = ("highs", "scip")
 _PACKAGES = {"highs": "highspy", "scip": "pyscipopt"}  # the package each backend needs
@@ -154,6 +155,26 @@ def solve(
             else:  # a time-out's incumbent that fails them is no incumbent
                 res.x, res.objective = None, None
     return res
+
+
+def build_scip(
+    model: MipModel, time_limit: float | None = None, verbose: bool = False, gap: float = 1e-9
+) -> tuple[Any, list[Any]]:
+    """``model`` as a ``pyscipopt.Model`` and its variables (in ``model``'s order), not yet
+    solved, with the settings :func:`solve` uses: a caller may add SCIP's own (e.g.
+    nonlinear) constraints, then :func:`optimize_scip`. Needs ``pyscipopt``."""
+    from ._scip import build_scip as build
+
+    return build(model, time_limit, verbose, gap)
+
+
+def optimize_scip(m: Any, x: list[Any], model: MipModel, t0: float) -> dict[str, Any]:
+    """Solve a model from :func:`build_scip`: the raw fields of a :class:`MipResult`
+    (``status``, ``x``, ``objective``, ``bound``, ``nodes``, ``message``, ``time_s`` counted
+    from ``t0``, a ``time.perf_counter()`` reading); no check of the answer."""
+    from ._scip import optimize_scip as optimize
+
+    return optimize(m, x, model, t0)
 
 
 def _polish(model: MipModel, res: MipResult) -> None:

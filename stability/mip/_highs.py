@@ -29,6 +29,7 @@ from typing import Any
 import highspy
 import numpy as np
 
+from .._lp import quiet_highs
 from ..errors import ModelError
 from .model import INF, MipModel
 
@@ -133,7 +134,7 @@ def solve_highs(
     """Solve with HiGHS; returns the raw fields of a :class:`~stability.mip.MipResult`."""
     t0 = time.perf_counter()
     flat = reformulate(model)
-    h = highspy.Highs()
+    h = quiet_highs()
     h.setOptionValue("output_flag", bool(verbose))
     if time_limit is not None:
         h.setOptionValue("time_limit", float(time_limit))

@@ -56,7 +56,7 @@ def build_scip(
         # optimal vertices and stopped converging on the wedge with it. (A wrong optimum once
         # seen with it on the Barrett box came from 4e-10 N of round-off in the load, which
         # SCIP's conflict analysis used exactly; its search order only reached that node
-        # first: stability.exact.clean_wrench, tests/test_solver_regressions.py.)
+        # first: stability.model.problem.clean_wrench, tests/stability/test_solver_regressions.py.)
         import pyscipopt as scip
 
         m.setSeparating(scip.SCIP_PARAMSETTING.OFF)

@@ -100,7 +100,7 @@ class MipModel:
         # one of many small MIPs solved in a row (refinement rounds): SCIP then runs without
         # separators and primal heuristics (stability.mip._scip.build_scip)
         self.many_small = False
-        # False: SCIP solves without presolving (stability._mipcommon.run re-checks a SCIP
+        # False: SCIP solves without presolving (stability.model.run.run re-checks a SCIP
         # "infeasible" that way: its presolve has proved feasible models infeasible)
         self.presolve = True
 

@@ -21,19 +21,21 @@ medians), and prints the table beside the thesis'.
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import examples as ex
-from .api import solve
-from .bench import write_csv
-from .grasp import Grasp
-from .mip import INF, MipModel
-from .mip import solve as mip_solve
-from .queries import Existence, MaxDisturbance, OptimalCommands
+from .. import examples as ex
+from ..api import solve
+from ..grasp import Grasp
+from ..io import write_csv
+from ..mip import INF, MipModel
+from ..mip import solve as mip_solve
+from ..queries import Existence, MaxDisturbance, OptimalCommands
+from .plots import pyplot, save
 
 CONTACTS = [3, 3, 3, 3, 4, 4, 4, 4, 4, 5, 6, 6]
 LABELS = "abcdefghijkl"
@@ -158,13 +160,9 @@ def print_grasps(summ: list[dict[str, Any]]) -> None:
 
 
 def write_grasps(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    path = write_csv(rows, out / "grasps.csv")
+    path = write_csv(out / "grasps.csv", rows)
     summ = summary(rows)
     fig, ax = plt.subplots(figsize=(9, 4.5))
     x = np.arange(len(summ))
@@ -184,8 +182,15 @@ def write_grasps(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     ax.set_title("refinement on twelve grasps: medians per task (this 2-core machine)")
     ax.legend(fontsize=8, ncol=2)
     ax.grid(True, which="both", axis="y", alpha=0.3)
-    fig.tight_layout()
-    png = out / "grasps.png"
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    png = save(fig, out / "grasps.png", dpi=120)
     return path, png
+
+
+def cli(args: argparse.Namespace) -> None:
+    """``python -m stability.bench grasps``: options ``--directions``, ``--wrenches``,
+    ``--time-limit`` (default 60 s), ``--only``, ``--out``."""
+    rows = bench_grasps(args.directions, args.wrenches, args.time_limit or 60.0,
+                        only=args.only)  # fmt: skip
+    print_grasps(summary(rows))
+    csv_path, png = write_grasps(rows, Path(args.out))
+    print(f"wrote {csv_path} and {png}")

@@ -1,5 +1,5 @@
 """SCIP's presolve proved a feasible refinement round infeasible (barrett_cube, a torque
-about the object x-axis): stability._mipcommon.run re-checks every SCIP "infeasible"
+about the object x-axis): stability.model.run.run re-checks every SCIP "infeasible"
 without presolve. Without that re-check the answer here was "unstable" in 0.0 s, where
 HiGHS and SCIP without presolve find 0.0314 N m (measured)."""
 

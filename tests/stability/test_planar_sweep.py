@@ -3,6 +3,8 @@ one ``solve(..., method="planar")`` per direction: same values, capped and stabl
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_planar_degenerate import box_grasp
@@ -10,6 +12,8 @@ from test_planar_degenerate import box_grasp
 from stability import Grasp, GraspError, MaxDisturbance, MethodError, solve
 from stability import planar as pl
 from stability.maps import resistible_forces
+from stability.planar import enumeration, sweep, system
+from stability.planar.solve import unit_grasp
 
 THREE = Grasp(points=[[-1, 0], [0, -1], [1, 0]], normals=[[1, 0], [0, 1], [-1, 0]], mu=0.5)
 
@@ -72,8 +76,8 @@ def test_thesis_map_needs_no_lp(monkeypatch):
     """The thesis grasp's LP states are all ruled out by the range test, the bound or
     the precheck: the map is pure numpy (the per-direction loop solves ~24 LPs each)."""
     calls = []
-    real = pl._lp_state
-    monkeypatch.setattr(pl, "_lp_state", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = sweep.lp_state
+    monkeypatch.setattr(sweep, "lp_state", lambda *a, **k: calls.append(1) or real(*a, **k))
     for preload in (0.0, 1.0):
         pl.max_disturbance_map(fresh_three(), circle(360), preload, cap=10.0)
     assert not calls
@@ -140,15 +144,17 @@ def test_precheck_only_rules_out_lps_without_solution(preload):
     """Over all (singular state, direction) pairs whose LP pins ``s`` (not only those a
     map reaches): the precheck says "no" only where the LP has no solution, and it
     rules out most of them."""
-    p = pl._preload(THREE, preload)
-    ctx = pl._Ctx.make(THREE, p, np.zeros(3), np.zeros(3))  # the thesis grasp has size 1
-    sw = pl._sweep_states(THREE, ctx, p, 8192)
+    p = enumeration.preload_vector(THREE, preload)
+    ctx = system.Context.make(THREE, p, np.zeros(3), np.zeros(3))  # the thesis grasp has size 1
+    sw = sweep._sweep_states(THREE, ctx, p, 8192)
     D = circle(12)
-    solvable, s_ub, pinned = pl._singular_bounds(ctx, sw, D, 10.0)
+    solvable, s_ub, pinned = sweep._singular_bounds(ctx, sw, D, 10.0)
     k, j = np.nonzero(solvable & pinned)
-    maybe = pl._precheck(ctx, sw, k, s_ub[k, j], D[j])
+    maybe = sweep._precheck(ctx, sw, k, s_ub[k, j], D[j])
     lp_ok = np.array([
-        pl._lp_state(pl.replace(ctx, d=D[jj]), sw.rS[kk], sw.rP[kk], (0.0, s_ub[kk, jj]), 1)
+        system.lp_state(
+            dataclasses.replace(ctx, d=D[jj]), sw.rS[kk], sw.rP[kk], (0.0, s_ub[kk, jj]), 1
+        )
         is not None
         for kk, jj in zip(k, j, strict=True)
     ])  # fmt: skip
@@ -165,19 +171,19 @@ def test_zonotope_bound_is_the_lp_value(preload):
     pts = rng.uniform(-1, 1, (4, 2))
     ang = rng.uniform(0, 2 * np.pi, 4)
     g = Grasp(pts, np.c_[np.cos(ang), np.sin(ang)], 0.6)
-    p = pl._preload(g, preload)
-    _, unit = pl._unit_grasp(g)
-    ctx = pl._Ctx.make(unit, p, np.zeros(3), np.zeros(3))
-    sw = pl._sweep_states(unit, ctx, p, 8192)
+    p = enumeration.preload_vector(g, preload)
+    _, unit = unit_grasp(g)
+    ctx = system.Context.make(unit, p, np.zeros(3), np.zeros(3))
+    sw = sweep._sweep_states(unit, ctx, p, 8192)
     assert sw.fixed.any()
     # random directions, and directions near the zonotopes' centres -h (rays that hit them)
     aim = -sw.mh[sw.fixed][rng.integers(0, sw.fixed.sum(), 12)]
     D = np.r_[rng.normal(size=(12, 3)), aim + 0.3 * rng.normal(size=(12, 3))]
-    feasible, s_hi = pl._zonotope_bounds(ctx, sw, D, 10.0)
+    feasible, s_hi = sweep._zonotope_bounds(ctx, sw, D, 10.0)
     n_feasible = 0
     for k, (S, P) in enumerate(zip(sw.mS[sw.fixed], sw.mP[sw.fixed], strict=True)):
         for j, d in enumerate(D):
-            res = pl._lp_state(pl.replace(ctx, d=d), S, P, (0.0, 10.0), sense=1)
+            res = system.lp_state(dataclasses.replace(ctx, d=d), S, P, (0.0, 10.0), sense=1)
             if res is not None:
                 n_feasible += 1
                 assert feasible[k, j]
@@ -218,7 +224,7 @@ def test_certified_rows_match_certified():
     perturbed ones."""
     rng = np.random.default_rng(3)
     p = np.full(3, 1.0)
-    ctx = pl._Ctx.make(THREE, p, np.zeros(3), np.zeros(3))
+    ctx = system.Context.make(THREE, p, np.zeros(3), np.zeros(3))
     code = {"detach": (0, 0), "roll": (0, 1), "slip+": (1, 1), "slip-": (-1, 1)}
     rows = []
     for d in circle(24):
@@ -230,9 +236,9 @@ def test_certified_rows_match_certified():
             ct = np.where(S == 0, sol.forces[:, 1], 0.0) + eps * rng.normal(size=3)
             rows.append((S, P, r, ct, sol.value, d))
     S, P, r, ct, s, d = (np.array(x) for x in zip(*rows, strict=True))
-    got = pl._certified_rows(ctx, S, P, r, ct, s, d)
+    got = sweep._certified_rows(ctx, S, P, r, ct, s, d)
     want = [
-        pl._certified(pl._Ctx.make(THREE, p, np.zeros(3), dk), Sk, Pk, rk, ck, sk)
+        system.certified(system.Context.make(THREE, p, np.zeros(3), dk), Sk, Pk, rk, ck, sk)
         for Sk, Pk, rk, ck, sk, dk in rows
     ]
     np.testing.assert_array_equal(got, want)

@@ -16,11 +16,13 @@ tolerance 1e-6) but SCIP's infeasibility proofs used it exactly:
   an infeasible node LP multiplied the 4.3e-10 N by 1.8e4 into "out-of-plane friction at
   contact 1 >= 7.7e-6 N", a global bound that cut off the optimum (SCIP's conflict analysis
   from LP dual rays; the search order of ``many_small`` reached that node first);
-* ``spatial`` proved Existence unstable along 157.5 degrees where refinement's exact
-  solution (residuals 1e-10) holds, whatever the motion bound or bound factor.
+* ``exact`` (then called ``spatial``) proved Existence unstable along 157.5 degrees where
+  refinement's exact solution (residuals 1e-10) holds, whatever the motion bound or bound
+  factor.
 
-The fix (:func:`stability.exact.clean_wrench`): a query's wrench components below 1e-7 of the
-problem's force scale are zeroed, as the round-off in ``G`` and ``J`` already was.
+The fix (:func:`stability.model.problem.clean_wrench`): a query's wrench components below
+1e-7 of the problem's force scale are zeroed, as the round-off in ``G`` and ``J`` already
+was.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 import pytest
 
 from stability import Existence, Grasp, MaxDisturbance, solve
-from stability.exact import CLEAN_RTOL, clean_wrench
+from stability.model.problem import CLEAN_RTOL, clean_wrench
 
 POINTS = np.array([
     [-0.0583073269258, 3.24146564307e-06, -1.16689345166e-09],
@@ -139,14 +141,14 @@ def test_a_real_out_of_plane_load_along_plus_z_is_not_held() -> None:
         assert solve(g, Existence(w, commands=COMMANDS), method="refinement").stable is False
 
 
-def test_spatial_agrees_with_refinement_along_157_5_degrees() -> None:
-    """Spatial said unstable (solved, infeasible) for s = 0.5 .. 2.56 before the fix, where
+def test_exact_agrees_with_refinement_along_157_5_degrees() -> None:
+    """exact said unstable (solved, infeasible) for s = 0.5 .. 2.56 before the fix, where
     refinement returns an exact solution."""
     g = _grasp()
     q = Existence(BASE + 2.0 * _direction(157.5), commands=COMMANDS)
     ref = solve(g, q, method="refinement")
     assert ref.stable and ref.stats["certified"] and ref.max_residual() <= 1e-7
-    sol = solve(g, q, method="spatial")
+    sol = solve(g, q, method="exact")
     assert sol.status == "solved" and sol.stable
     assert "max_dissipation" in sol.conditions and "friction_cone" in sol.conditions
     assert sol.max_residual() <= 1e-7 * (1.0 + float(np.abs(sol.forces).max()))

@@ -22,16 +22,18 @@ times, log scale).
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import examples as ex
-from .api import solve
-from .bench import write_csv
-from .queries import Existence, MaxDisturbance
+from .. import examples as ex
+from ..api import solve
+from ..io import write_csv
+from ..queries import Existence, MaxDisturbance
+from .plots import pyplot, save
 
 METHODS = ("no_mdp", "iterative")
 BACKENDS = ("highs", "scip")
@@ -129,13 +131,9 @@ def print_mip_table(rows: list[dict[str, Any]]) -> None:
 
 
 def write_mip(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = write_csv(rows, out / "mip.csv")
+    csv_path = write_csv(out / "mip.csv", rows)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
     cases = list(dict.fromkeys(r["case"] for r in rows))
     x = np.arange(len(cases))
@@ -155,8 +153,14 @@ def write_mip(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
         ax.grid(True, axis="y", which="both", alpha=0.3)
     axes[0].set_ylabel("median time [s]")
     axes[1].legend(fontsize=8)
-    fig.tight_layout()
-    png = out / "mip.png"
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    png = save(fig, out / "mip.png", dpi=120)
     return csv_path, png
+
+
+def cli(args: argparse.Namespace) -> None:
+    """``python -m stability.bench mip``: options ``--repeats`` (default 7), ``--seed``,
+    ``--out``."""
+    rows = bench_mip(args.repeats or 7, args.seed)
+    print_mip_table(rows)
+    csv_path, png = write_mip(rows, Path(args.out))
+    print(f"wrote {csv_path} and {png}")

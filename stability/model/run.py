@@ -1,5 +1,7 @@
-"""What the MIP methods (``no_mdp``, ``iterative``, ``refinement``) share: options, the
-query's data, one solve with deadline, and the Solution they return."""
+"""What the MIP methods (``no_mdp``, ``iterative``, ``refinement``, ``exact``) share: their
+options (:class:`MipOptions`), one solve of an :class:`~stability.model.problem.ExactProblem`
+within the deadline, checked against the model's exact conditions (:func:`run`), and the
+:class:`~stability.Solution` they return (:func:`solution`, :func:`stopped`)."""
 
 from __future__ import annotations
 
@@ -11,12 +13,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from . import mip
-from .errors import GraspError
-from .exact import ExactBounds, ExactPoint, ExactProblem, hand_data
-from .grasp import Grasp
-from .queries import Existence, Query, checked_base, checked_direction_cap
-from .solution import Solution
+from .. import mip
+from ..errors import GraspError
+from ..grasp import Grasp
+from ..queries import Query
+from ..solution import Solution
+from .problem import ExactBounds, ExactPoint, ExactProblem
 
 # the model_residuals keys every exact-model method enforces (not max_dissipation)
 HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
@@ -43,7 +45,7 @@ class MipOptions:
     method's measured faster one, :data:`DEFAULT_BACKENDS`), ``time_limit``
     [s] for the whole method call (None: none), ``verbose`` (the solver's log), ``edges``
     (friction polygon sides, spatial contacts), ``bound_factor`` (model bounds as a multiple
-    of the problem's force scale, :func:`stability.exact.scale_bounds`)."""
+    of the problem's force scale, :func:`stability.model.problem.scale_bounds`)."""
 
     backend: str | None = None
     time_limit: float | None = None
@@ -88,42 +90,6 @@ class MipOptions:
         return max(0.0, self.deadline - time.perf_counter())
 
 
-@dataclass
-class QueryData:
-    """A validated Existence / MaxDisturbance query: wrench or (direction, cap), preload,
-    hand ``(R, f_c)``."""
-
-    wrench: NDArray[np.float64] | None
-    direction: NDArray[np.float64] | None
-    cap: float
-    preload: NDArray[np.float64]
-    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
-    base: NDArray[np.float64] | None = None  # MaxDisturbance: the wrench always applied
-
-    @classmethod
-    def of(cls, grasp: Grasp, query: Query) -> QueryData:
-        preload = grasp.per_contact(query.preload, "preload")
-        hand = hand_data(grasp, query.commands)
-        if isinstance(query, Existence):
-            return cls(grasp.wrench(query.wrench), None, 0.0, preload, hand)
-        d, cap = checked_direction_cap(grasp, query)
-        return cls(None, d, cap, preload, hand, checked_base(grasp, query))
-
-    @property
-    def wrench_max(self) -> NDArray[np.float64]:
-        return query_wrench_max(self)
-
-
-def query_wrench_max(data: Any) -> NDArray[np.float64]:
-    """Per component the largest magnitude a query's wrench takes: ``wrench`` (Existence),
-    else ``max(|base|, |base + cap direction|)`` (MaxDisturbance; ``data`` a QueryData or
-    QueryModel)."""
-    if data.direction is None:
-        return data.wrench
-    base = np.zeros_like(data.direction) if data.base is None else data.base
-    return np.maximum(np.abs(base), np.abs(base + data.cap * data.direction))
-
-
 class Stop(Exception):
     """A MIP gave no answer (time-out or solver error): ends the method with that status."""
 
@@ -142,7 +108,7 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
     if opts.backend == "scip" and res.status in ("infeasible", "infeasible_or_unbounded"):
         # SCIP's presolve has proved feasible models infeasible (barrett_cube's grasp read
         # from MuJoCo, a torque about x: "infeasible" in 0.0 s where the same MIP without
-        # presolve, and HiGHS, find the answer; tests/test_solver_regressions.py). An
+        # presolve, and HiGHS, find the answer; tests/stability/test_solver_regressions.py). An
         # infeasible round ends a query ("unstable"), so that claim is checked once more
         # without presolve; feasible answers need no second look (they are certified).
         problem.model.presolve = False
@@ -220,5 +186,5 @@ def bounds_stats(bounds: ExactBounds, stats: dict[str, Any]) -> None:
     stats["force_scale"] = bounds.scale
 
 
-__all__ = ["CONDITIONS", "HAND_CONDITIONS", "MipOptions", "QueryData", "Stop", "bounds_stats",
-           "default_backend", "query_wrench_max", "run", "solution", "stopped"]  # fmt: skip
+__all__ = ["CONDITIONS", "DEFAULT_BACKENDS", "HAND_CONDITIONS", "MipOptions", "Stop",
+           "bounds_stats", "default_backend", "run", "solution", "stopped"]  # fmt: skip

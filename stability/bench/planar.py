@@ -1,12 +1,6 @@
-"""Benchmarks: ``python -m stability.bench planar``, ``python -m stability.bench mip``
-(:mod:`stability.bench_mip`), ``python -m stability.bench refinement``
-(:mod:`stability.bench_refinement`), ``python -m stability.bench grasps``
-(:mod:`stability.bench_grasps`) and ``python -m stability.bench tradeoff``
-(:mod:`stability.bench_tradeoff`).
-
-``planar`` reproduces the thesis' Table tab:performance (number of slip states
-and enumeration time for m = 2..9 random contacts) side by side with our
-numbers, and extends it to m = 20 and 50. For each m it reports medians over
+"""``python -m stability.bench planar``: reproduces the thesis' Table tab:performance
+(number of slip states and enumeration time for m = 2..9 random contacts) side by side
+with our numbers, and extends it to m = 20 and 50. For each m it reports medians over
 ``--repeats`` random generic grasps (fresh grasp each repeat, fixed seed):
 
 * ``faces``: faces of the tangential-plane arrangement (thesis ``#(S)``);
@@ -14,7 +8,7 @@ numbers, and extends it to m = 20 and 50. For each m it reports medians over
   solver visits when it has to prove instability);
 * ``enum_s``: time to enumerate the slip states (the thesis' timed quantity);
 * ``thesis_alg_here_s``: the thesis' own enumeration (one LP per step, dual
-  polyhedron, minimum cycle basis; :func:`planar.slip_states_thesis`) timed
+  polyhedron, minimum cycle basis; :func:`stability.planar.slip_states_thesis`) timed
   on the same machine in the same run (median of 3, m <= 9), the reference
   for the speed-up;
 * ``query_s``: time to answer one ``Existence`` query for a random wrench
@@ -30,17 +24,18 @@ Writes ``planar.csv`` and ``planar.png`` (time vs m, log scale, ours vs thesis).
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from . import planar as pl
-from .api import solve
-from .grasp import Grasp
-from .queries import Existence
+from ..api import solve
+from ..grasp import Grasp
+from ..io import write_csv
+from ..planar import count_slip_faces, slip_states, slip_states_thesis
+from ..queries import Existence
+from .plots import pyplot, save
 
 THESIS = {  # m: (#S, seconds) from thesis Table tab:performance (2.8 GHz i7)
     2: (10, 0.006), 3: (26, 0.02), 4: (50, 0.09), 5: (82, 0.42),
@@ -78,7 +73,7 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
         faces = joint = states = 0
         for k in range(reps):
             g = random_grasp(rng, m)
-            t, S = _timed(lambda g=g: pl.slip_states(g))
+            t, S = _timed(lambda g=g: slip_states(g))
             enum.append(t)
             w = rng.normal(size=3)
             t, sol = _timed(lambda g=g, w=w: solve(g, Existence(w, preload=1.0)))
@@ -93,7 +88,7 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
             assert not sol.stable
             warm.append(t)
             if k == 0:
-                faces = pl.count_slip_faces(g)["total"]
+                faces = count_slip_faces(g)["total"]
                 states = len(S)
                 joint = sol.stats["states"]
         # the thesis' own algorithm (LP per step + minimum cycle basis), same machine
@@ -102,7 +97,7 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
             lp_t = []
             for _ in range(3):
                 g = random_grasp(rng, m)
-                lp_t.append(_timed(lambda g=g: pl.slip_states_thesis(g))[0])
+                lp_t.append(_timed(lambda g=g: slip_states_thesis(g))[0])
             lp_enum = float(np.median(lp_t))
         th = THESIS.get(m, (None, None))
         rows.append(
@@ -125,23 +120,12 @@ def bench_planar(repeats: int = 15, seed: int = 0, ms: list[int] | None = None) 
     return rows
 
 
-def write_csv(rows: list[dict], path: Path) -> Path:
-    """``rows`` (dicts with the same keys) as a CSV file with a header; returns ``path``."""
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    return path
-
-
 def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
+    import matplotlib.ticker
 
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = write_csv(rows, out / "planar.csv")
+    csv_path = write_csv(out / "planar.csv", rows)
     m = [r["m"] for r in rows]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     tm = [r["m"] for r in rows if r["thesis_time_s"]]
@@ -175,11 +159,7 @@ def write_planar(rows: list[dict], out: Path) -> tuple[Path, Path]:
     ax.set_title("Planar passive stability: time vs contacts")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    png = out / "planar.png"
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
-    return csv_path, png
+    return csv_path, save(fig, out / "planar.png", dpi=120)
 
 
 def print_table(rows: list[dict]) -> None:
@@ -202,63 +182,10 @@ def print_table(rows: list[dict]) -> None:
         )
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m stability.bench", description=__doc__)
-    ap.add_argument("which", choices=["planar", "mip", "refinement", "grasps", "tradeoff"],
-                    help="benchmark to run")  # fmt: skip
-    ap.add_argument("--max-levels", type=int, default=9,
-                    help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
-    ap.add_argument("--time-limit", type=float, default=None,
-                    help="seconds per query (default: refinement 120, grasps 60, "
-                    "tradeoff 60)")  # fmt: skip
-    ap.add_argument("--directions", type=int, default=10,
-                    help="grasps: max-disturbance directions per grasp")  # fmt: skip
-    ap.add_argument("--wrenches", type=int, default=10,
-                    help="grasps: optimal-commands wrenches per grasp")  # fmt: skip
-    ap.add_argument("--only", default=None,
-                    help="grasps: labels to run (e.g. 'abe'); tradeoff: query indices")  # fmt: skip
-    ap.add_argument("--out", default="bench_out", help="folder for the CSV and PNG")
-    ap.add_argument("--repeats", type=int, default=None,
-                    help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
-    if args.which == "grasps":
-        from .bench_grasps import bench_grasps, print_grasps, summary, write_grasps
-
-        rows = bench_grasps(args.directions, args.wrenches, args.time_limit or 60.0,
-                            only=args.only)  # fmt: skip
-        print_grasps(summary(rows))
-        csv_path, png = write_grasps(rows, Path(args.out))
-        print(f"wrote {csv_path} and {png}")
-        return
-    if args.which == "tradeoff":
-        from .bench_tradeoff import bench_tradeoff, print_tradeoff, write_tradeoff
-
-        rows = bench_tradeoff(args.time_limit or 60.0, only=args.only)
-        print_tradeoff(rows)
-        csv_path, png = write_tradeoff(rows, Path(args.out))
-        print(f"wrote {csv_path} and {png}")
-        return
-    if args.which == "refinement":
-        from .bench_refinement import bench_refinement, write_refinement
-
-        rows = bench_refinement(args.max_levels, args.time_limit or 120.0)
-        csv_path, png = write_refinement(rows, Path(args.out))
-        print(f"wrote {csv_path} and {png}")
-        return
-    if args.which == "mip":
-        from .bench_mip import bench_mip, print_mip_table, write_mip
-
-        rows = bench_mip(args.repeats or 7, args.seed)
-        print_mip_table(rows)
-        csv_path, png = write_mip(rows, Path(args.out))
-        print(f"wrote {csv_path} and {png}")
-        return
+def cli(args: argparse.Namespace) -> None:
+    """``python -m stability.bench planar``: options ``--repeats`` (default 15), ``--seed``,
+    ``--out``."""
     rows = bench_planar(args.repeats or 15, args.seed)
     print_table(rows)
     csv_path, png = write_planar(rows, Path(args.out))
     print(f"wrote {csv_path} and {png}")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,5 +1,5 @@
 """``python -m stability.bench tradeoff``: time against error, every 3D method and setting
-on the same queries, the error measured against ``method="spatial"`` (the exact problem
+on the same queries, the error measured against ``method="exact"`` (the exact problem
 solved globally).
 
 Queries (MaxDisturbance, cap 100 N): the pinch along +z (commands 0.1 N m), the tendon
@@ -9,8 +9,8 @@ three-contact grasp embedded in z = 0 with preload 1 N along three in-plane dire
 fixtures only), ``no_mdp``, ``iterative``, ``refinement`` at q = 1..9 (4 initial edges,
 ``4 * 2^q`` equivalent edges), full resolution ``refine=False`` at k = 8..2048 edges,
 ``refinement`` (q = 7) stopping once its certified exact value is within ``certify_gap`` =
-1e-2, 1e-3, 1e-4 of the relaxation's bound, and ``spatial``. The error of one answer is
-``|v - v_spatial| / v_spatial`` (an "unstable" answer counts as 0 N). Each solve is
+1e-2, 1e-3, 1e-4 of the relaxation's bound, and ``exact``. The error of one answer is
+``|v - v_exact| / v_exact`` (an "unstable" answer counts as 0 N). Each solve is
 limited to ``--time-limit`` seconds; a time-out is drawn at the limit and has no error.
 Writes ``tradeoff.csv`` (one row per solve) and ``tradeoff.png`` (every solve, and each
 setting's median time and error).
@@ -18,6 +18,7 @@ setting's median time and error).
 
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 import time
@@ -26,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from . import examples as ex
-from .api import solve
-from .bench import write_csv
-from .errors import GraspError, MethodError
-from .queries import MaxDisturbance
+from .. import examples as ex
+from ..api import solve
+from ..errors import GraspError, MethodError
+from ..io import write_csv
+from ..queries import MaxDisturbance
+from .plots import pyplot, save
 
 CAP = 100.0
 FLOOR = 1e-7  # errors below are drawn at this line
@@ -67,13 +69,13 @@ def settings() -> list[tuple[str, str, str, dict[str, Any]]]:
              {"levels": q, "refine": False}) for q in range(1, 10)]  # fmt: skip
     out += [(f"certified gap={gap:g}", "refinement, certify_gap", "refinement",
              {"certify_gap": gap}) for gap in (1e-2, 1e-3, 1e-4)]  # fmt: skip
-    out.append(("spatial", "spatial", "spatial", {}))
+    out.append(("exact", "exact", "exact", {}))
     return out
 
 
 def bench_tradeoff(time_limit: float = 60.0, only: str | None = None,
                    progress: bool = True) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per (query, setting): time, value, status, error against spatial."""
+    """One row per (query, setting): time, value, status, error against exact."""
     from tqdm import tqdm
 
     qs = queries()
@@ -84,7 +86,7 @@ def bench_tradeoff(time_limit: float = 60.0, only: str | None = None,
     bar = tqdm(total=len(qs) * len(st), desc="tradeoff", disable=not progress)
     for name, g, q, planar in qs:
         ref = None
-        for label, family, method, opts in reversed(st):  # spatial first: the reference
+        for label, family, method, opts in reversed(st):  # exact first: the reference
             bar.update(1)
             gg, qq = g, q
             if method == "planar":
@@ -101,7 +103,7 @@ def bench_tradeoff(time_limit: float = 60.0, only: str | None = None,
             value = None
             if sol.status == "solved":
                 value = sol.value if sol.stable else 0.0
-            if method == "spatial":
+            if method == "exact":
                 ref = value
             err = None
             if value is not None and ref is not None and ref > 0:
@@ -138,28 +140,27 @@ def print_tradeoff(rows: list[dict[str, Any]]) -> None:
 
 COLORS = {"planar": "C2", "gws": "C7", "no_mdp": "C3", "iterative": "C4",
           "refinement": "C0", "full resolution": "C1", "refinement, certify_gap": "C9",
-          "spatial": "k"}  # fmt: skip
+          "exact": "k"}  # fmt: skip
 
 
 def read_tradeoff(path: Path) -> list[dict[str, Any]]:
-    """Rows of a ``tradeoff.csv`` (numbers parsed; empty fields None)."""
+    """Rows of a ``tradeoff.csv`` (numbers parsed; empty fields None; the reference's old
+    label ``spatial``, from before the method was renamed, read as ``exact``)."""
     rows = []
     with Path(path).open() as fh:
         for r in csv.DictReader(fh):
             for k in ("time_s", "value", "reference", "error"):
                 r[k] = None if r[k] == "" else float(r[k])
+            for k in ("setting", "family"):
+                r[k] = "exact" if r[k] == "spatial" else r[k]
             rows.append(r)
     return rows
 
 
 def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    path = write_csv(rows, out / "tradeoff.csv")
+    path = write_csv(out / "tradeoff.csv", rows)
     fig, ax = plt.subplots(figsize=(10.5, 5.5))
     for r in rows:
         col = COLORS[r["family"]]
@@ -188,12 +189,18 @@ def write_tradeoff(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     ax.text(0.01, 3.5, "time-outs (x)", fontsize=7, color="grey", transform=tr)
     ax.set_yscale("log")
     ax.set_xlabel("time per query [s] (log)")
-    ax.set_ylabel("relative error of the max disturbance vs spatial (log)")
+    ax.set_ylabel("relative error of the max disturbance vs exact (log)")
     ax.set_title("speed vs accuracy: 6 queries, every method and setting (dots: single solves)")
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.tight_layout()
-    png = out / "tradeoff.png"
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    png = save(fig, out / "tradeoff.png", dpi=120)
     return path, png
+
+
+def cli(args: argparse.Namespace) -> None:
+    """``python -m stability.bench tradeoff``: options ``--time-limit`` (default 60 s),
+    ``--only``, ``--out``."""
+    rows = bench_tradeoff(args.time_limit or 60.0, only=args.only)
+    print_tradeoff(rows)
+    csv_path, png = write_tradeoff(rows, Path(args.out))
+    print(f"wrote {csv_path} and {png}")

@@ -12,11 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-try:
-    from naive_planar import naive_residuals, naive_stable
-except ImportError:  # tests/ imported as a package
-    from tests.naive_planar import naive_residuals, naive_stable
+from naive_planar import naive_residuals, naive_stable
 
 # -- the thesis grasp (fig. grasp2, tab. three_contact) ------------------------------
 THESIS_POINTS = [(-1.0, 0.0), (0.0, -1.0), (1.0, 0.0)]

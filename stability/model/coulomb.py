@@ -1,104 +1,33 @@
 """The exact problem with Coulomb friction and maximum dissipation, stated for any query:
-shared by ``spatial`` (solved globally by SCIP) and ``refinement`` (whose relaxed answers it
+shared by ``exact`` (solved globally by SCIP) and ``refinement`` (whose relaxed answers it
 certifies, or repairs, as exact solutions).
 
-:class:`QueryModel`: a validated query (wrench or direction and cap, preload, hand,
-OptimalCommands' command range and objective). :func:`add_query`: its object equilibrium
-and objective on an :class:`~stability.exact.ExactProblem`. :class:`ExactMdp`: the exact
-model's linear part (the tangential motions ``d_t`` and slide bounds ``s`` as variables; the
-nonlinear rows of ``spatial`` go on SCIP's model). :func:`mode_lp` / :func:`polish`: with
-each contact's mode (open, sticking, sliding along ``u``) fixed, the exact problem is one
-LP: a point of it satisfies every condition exactly.
+:class:`CoulombModel`: the exact model's linear part, an
+:class:`~stability.model.problem.ExactProblem` without friction polygon plus the tangential
+motions ``d_t`` and slide bounds ``s`` as variables (the nonlinear rows, circular cone and
+maximum dissipation, go on SCIP's model: :meth:`CoulombModel.scip_model`). The query's
+equilibrium and objective come from :func:`stability.model.query.add_query`.
+:func:`mode_lp` / :func:`polish`: with each contact's mode (open, sticking, sliding along
+``u``) fixed, the exact problem is one LP: a point of it satisfies every condition exactly.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ._mipcommon import CONDITIONS, QueryData, query_wrench_max
-from .errors import GraspError
-from .exact import (
-    ExactBounds,
-    ExactPoint,
-    ExactProblem,
-    actuator_vector,
-    hand_data,
-    length_scale,
-    scale_bounds,
-)
-from .grasp import Grasp
-from .mip import INF
-from .mip.model import Row
-from .queries import OptimalCommands
+from ..grasp import Grasp
+from ..mip import INF, build_scip
+from ..mip import solve as mip_solve
+from ..mip.model import Row
+from .problem import ExactBounds, ExactPoint, ExactProblem, length_scale
+from .query import QueryData, add_query, query_value
+from .run import CONDITIONS
 
-__all__ = ["ExactMdp", "QueryModel", "add_query", "certify", "exact_conditions", "exact_point",
-           "mode_lp", "polish", "query_value"]  # fmt: skip
-
-
-@dataclass
-class QueryModel:
-    """A validated query: the QueryData fields plus the OptimalCommands ones."""
-
-    wrench: NDArray[np.float64] | None
-    direction: NDArray[np.float64] | None
-    cap: float
-    preload: NDArray[np.float64]
-    hand: tuple[NDArray[np.float64], NDArray[np.float64]] | None
-    command_range: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
-    objective: str | None = None
-    weights: NDArray[np.float64] | None = None
-    max_normal_force: float | None = None
-    base: NDArray[np.float64] | None = None  # MaxDisturbance: the wrench always applied
-
-    @property
-    def wrench_max(self) -> NDArray[np.float64]:
-        return query_wrench_max(self)
-
-    @classmethod
-    def of(cls, grasp: Grasp, query: Any, bound_factor: float) -> QueryModel:
-        if not isinstance(query, OptimalCommands):
-            d = QueryData.of(grasp, query)
-            return cls(d.wrench, d.direction, d.cap, d.preload, d.hand, base=d.base)
-        if grasp.J is None:
-            raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
-        wrench = grasp.wrench(query.wrench)
-        preload = grasp.per_contact(query.preload, "preload")
-        R, _ = hand_data(grasp, None)
-        a = R.shape[1]
-        lower = _per_actuator(query.lower, a, "lower", 0.0)
-        if np.any(lower < 0):
-            raise GraspError(f"OptimalCommands lower must be >= 0, got {lower}")
-        if query.upper is None:  # a bound from the wrench's own scale
-            b = scale_bounds(grasp, wrench, preload, (R, np.zeros(a)), bound_factor)
-            upper = np.maximum(b.excess, lower)
-        else:
-            upper = _per_actuator(query.upper, a, "upper", 0.0)
-        if np.any(upper < lower):
-            raise GraspError(f"OptimalCommands upper {upper} below lower {lower}")
-        if query.objective not in ("max", "weighted"):
-            raise GraspError(
-                f"OptimalCommands objective must be 'max' or 'weighted', got {query.objective!r}"
-            )
-        weights = _per_actuator(query.weights, a, "weights", 1.0)
-        if np.any(weights < 0):
-            raise GraspError(f"OptimalCommands weights must be >= 0, got {weights}")
-        nmax = query.max_normal_force
-        if nmax is not None:
-            nmax = float(nmax)
-            if not (math.isfinite(nmax) and nmax > 0):
-                raise GraspError(f"max_normal_force must be finite and > 0 N, got {nmax!r}")
-        scale_cmd = upper if query.upper is not None else np.zeros(a)  # for scale_bounds only
-        return cls(wrench, None, 0.0, preload, (R, scale_cmd), (lower, upper), query.objective,
-                   weights, nmax)  # fmt: skip
-
-
-def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float64]:
-    return actuator_vector(v, a, f"OptimalCommands {name}", default)
+__all__ = ["CoulombModel", "certify", "exact_conditions", "exact_point", "mode_lp", "polish"]
 
 
 def exact_conditions(eta: float) -> tuple[str, ...]:
@@ -109,54 +38,18 @@ def exact_conditions(eta: float) -> tuple[str, ...]:
     return out if eta == 0 else tuple(c for c in out if c != "spring_law")
 
 
-def add_query(prob: ExactProblem, data: QueryModel) -> int | None:
-    """Object equilibrium and the query's objective on ``prob``: the index of ``s``
-    (MaxDisturbance), of the largest command (OptimalCommands "max"), -1 (OptimalCommands
-    "weighted": the objective is ``weights . f_c``) or None (Existence)."""
-    M = prob.model
-    var = None
-    if data.direction is not None:
-        base = 0.0 * data.direction if data.base is None else data.base
-        var = prob.add_object_equilibrium(base, data.direction, data.cap)
-        M.set_objective([var], [1.0], maximize=True)
-    else:
-        prob.add_object_equilibrium(data.wrench)
-        if data.command_range is not None:
-            fc = prob.fc
-            if data.objective == "max":
-                var = M.add_var(0.0, float(data.command_range[1].max()), "C", "max_command")
-                for j in fc:  # t >= f_c,j
-                    M.add_row([var, int(j)], [1.0, -1.0], 0.0, INF)
-                M.set_objective([var], [1.0])
-            else:
-                var = -1
-                M.set_objective(fc, data.weights)
-    return var
+class CoulombModel:
+    """The exact model with Coulomb friction and maximum dissipation: ExactProblem (no
+    friction polygon) plus the tangential motions ``d_t`` (``self.dt``, (m, 2)) and slide
+    bounds ``s`` (``self.slide``) as linear variables; the nonlinear rows (circular cone,
+    ``|d_t| <= s``, ``c_t . d_t + mu c_n s <= 0``) are added on SCIP's model by
+    :meth:`scip_model`. Formerly ``ExactMdp`` (MDP: the maximum dissipation principle)."""
 
-
-def query_value(model: Any, pt: ExactPoint, var: int | None, data: QueryModel) -> float | None:
-    """The query's value at ``pt`` (``model.prob`` the ExactProblem ``var`` came from):
-    ``s`` (MaxDisturbance, clipped to ``[0, cap]``), the largest or weighted commands
-    (OptimalCommands), None (Existence)."""
-    if var is None:
-        return None
-    if data.direction is not None:
-        return float(min(data.cap, max(0.0, pt.x[var])))
-    if var == -1:
-        return float(data.weights @ pt.x[model.prob.fc])
-    return float(pt.x[model.prob.fc].max(initial=0.0))
-
-
-class ExactMdp:
-    """The exact model: ExactProblem (no friction polygon) plus the tangential motions
-    ``d_t`` (``self.dt``, (m, 2)) and slide bounds ``s`` (``self.slide``) as linear
-    variables; the nonlinear rows are added on SCIP's model by :meth:`scip_model`."""
-
-    def __init__(self, grasp: Grasp, data: QueryModel, bounds: Any, eta: float,
+    def __init__(self, grasp: Grasp, data: QueryData, bounds: Any, eta: float,
                  motion_bound: float) -> None:  # fmt: skip
         self.grasp, self.eta = grasp, eta
         prob = ExactProblem(grasp, data.preload, data.hand, bounds, friction=False,
-                            name="spatial", command_range=data.command_range)  # fmt: skip
+                            name="exact", command_range=data.command_range)  # fmt: skip
         self.prob = prob
         M, m, B = prob.model, grasp.m, bounds.force
         if data.max_normal_force is not None:
@@ -178,9 +71,9 @@ class ExactMdp:
         Jt = None if prob.J is None else prob.J.reshape(m, 3, -1)
         for i in range(m):
             for t in range(2):  # d_t - G_t^T r + J_t q = 0
-                idx, val = prob._extend([int(self.dt[i, t])], [-1.0], prob.r, Gt[i, 1 + t])
+                idx, val = prob.extend([int(self.dt[i, t])], [-1.0], prob.r, Gt[i, 1 + t])
                 if Jt is not None:
-                    idx, val = prob._extend(idx, val, prob.q, -Jt[i, 1 + t])
+                    idx, val = prob.extend(idx, val, prob.q, -Jt[i, 1 + t])
                 M.add_row(idx, val, 0.0, 0.0, f"tangent{i}.{t}")
             # the cone's outer square, implied by the SOC: helps the first LP relaxations
             cn, ct = int(prob.c[i, 0]), prob.c[i, 1:]
@@ -200,8 +93,6 @@ class ExactMdp:
     def scip_model(
         self, time_limit: float | None, verbose: bool, feastol: float, gap: float
     ) -> tuple:
-        from .mip._scip import build_scip
-
         m, x = build_scip(self.prob.model, time_limit, verbose, gap)
         m.setParam("numerics/feastol", feastol)
         g, c = self.grasp, self.prob.c
@@ -237,7 +128,7 @@ class ExactMdp:
 
 
 def polish(
-    ex: ExactMdp, x: NDArray[np.float64], gap: float, stats: dict[str, Any]
+    ex: CoulombModel, x: NDArray[np.float64], gap: float, stats: dict[str, Any]
 ) -> NDArray[np.float64]:
     """SCIP's point made exact and tidy. With the binaries and each loaded contact's mode
     fixed at SCIP's, every condition is linear:
@@ -261,7 +152,7 @@ def polish(
 
 
 def exact_point(
-    ex: ExactMdp, x: NDArray[np.float64], sources: tuple[str, ...], gap: float | None = None
+    ex: CoulombModel, x: NDArray[np.float64], sources: tuple[str, ...], gap: float | None = None
 ) -> tuple[NDArray[np.float64], str] | None:
     """The least-motion optimum of the first :func:`mode_lp` (by ``sources``) that has one,
     satisfies every exact condition (within ``1e-7 (1 + B)``) and, with ``gap``, is no worse
@@ -286,9 +177,9 @@ def exact_point(
 
 
 def certify(
-    grasp: Grasp, data: QueryModel, bounds: ExactBounds, relaxed: ExactProblem,
+    grasp: Grasp, data: QueryData, bounds: ExactBounds, relaxed: ExactProblem,
     x: NDArray[np.float64], var: int | None, eta: float, motion_bound: float,
-) -> tuple[ExactMdp, ExactPoint, float | None] | None:  # fmt: skip
+) -> tuple[CoulombModel, ExactPoint, float | None] | None:  # fmt: skip
     """An exact solution near a relaxation's answer ``x`` (of ``relaxed``'s model, ``var``
     its query variable): each contact keeps the relaxation's mode (open; sliding along its
     motion ``d_t``; on the cone's boundary; sticking), and :func:`mode_lp` solves the exact
@@ -296,7 +187,7 @@ def certify(
     query value, or None when those modes admit no exact solution. A certificate: Existence
     is then stable; a MaxDisturbance's value is a lower bound on the exact optimum (the
     relaxation's an upper one); an OptimalCommands' an upper bound."""
-    ex = ExactMdp(grasp, data, bounds, eta, motion_bound)
+    ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
     qvar = add_query(ex.prob, data)
     prob = ex.prob
     if prob.n_base != relaxed.n_base:
@@ -318,7 +209,7 @@ def certify(
     return ex, pt, query_value(ex, pt, qvar, data)
 
 
-def mode_lp(ex: ExactMdp, x: NDArray[np.float64], source: str) -> tuple[Any, Any] | None:
+def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any, Any] | None:
     """The LP of :func:`polish` (each contact's mode fixed at ``x``'s) and its optimum;
     None when it has none. Contacts with friction on the cone's boundary slide along
     ``x``'s motion (``source="motion"``: ``u = d_t / |d_t|`` where the contact clearly
@@ -326,8 +217,6 @@ def mode_lp(ex: ExactMdp, x: NDArray[np.float64], source: str) -> tuple[Any, Any
     its tolerance, which one of them may not absorb. ``"relaxation"``: every contact that
     moves at all slides along ``x``'s motion, whatever its friction (a relaxation's friction
     only lies in the motion's sector)."""
-    from .mip import solve as mip_solve
-
     prob, g = ex.prob, ex.grasp
     M = prob.model
     lp = M.fixed(x)

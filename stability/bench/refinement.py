@@ -16,6 +16,7 @@ Writes ``refinement.csv`` and ``refinement.png`` (time vs equivalent edges, log-
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
 from pathlib import Path
@@ -23,10 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from . import examples as ex
-from .api import solve
-from .bench import write_csv
-from .queries import MaxDisturbance
+from .. import examples as ex
+from ..api import solve
+from ..io import write_csv
+from ..queries import MaxDisturbance
+from .plots import pyplot, save
 
 # thesis tab:data: edges -> (max wrench, t_full, t_hier, robust max wrench, t_full, t_hier)
 THESIS = {
@@ -109,13 +111,9 @@ def _print_row(r: dict[str, Any]) -> None:
 
 
 def write_refinement(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = write_csv(rows, out / "refinement.csv")
+    csv_path = write_csv(out / "refinement.csv", rows)
     fig, ax = plt.subplots(figsize=(7, 4.5))
     e = [r["equivalent_edges"] for r in rows]
     for key, label, style in (("full_s", "full resolution", "C0--o"),
@@ -132,8 +130,13 @@ def write_refinement(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]
     ax.set_title("Refinement vs full resolution (4 contacts, this 2-core machine)")
     ax.legend()
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    png = out / "refinement.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = save(fig, out / "refinement.png", dpi=110)
     return csv_path, png
+
+
+def cli(args: argparse.Namespace) -> None:
+    """``python -m stability.bench refinement``: options ``--max-levels``, ``--time-limit``
+    (default 120 s), ``--out``."""
+    rows = bench_refinement(args.max_levels, args.time_limit or 120.0)
+    csv_path, png = write_refinement(rows, Path(args.out))
+    print(f"wrote {csv_path} and {png}")

@@ -4,12 +4,12 @@ known answers, where ``no_mdp`` is wrong, against ``planar``, and on a MuJoCo sc
 from __future__ import annotations
 
 import numpy as np
+import problems as P
 import pytest
 
 import stability
 from stability import Existence, GraspError, MaxDisturbance, MethodError, solve
 from stability import mip as smip
-from tests import problems as P
 
 BACKENDS = ("highs", "scip")
 METHODS = ("no_mdp", "iterative")

@@ -360,7 +360,7 @@ def test_where_methods_fail_one_sector_and_no_mdp_over_predict() -> None:
     """The tendon finger pushed along +y: with 4 edges (one 90 deg sector for friction and
     slide together) the relaxation "holds" the cap of 100 N, about 29x the converged 3.46 N
     (the thesis' >100 N at 4 edges); no_mdp, with no dissipation at all, also holds 100 N.
-    The converged value agrees with iterative and with spatial (the exact problem solved
+    The converged value agrees with iterative and with exact (the exact problem solved
     globally) within 1 %, and its solution's residuals vanish."""
     g = examples.tendon_finger()
     d = [0, 1, 0, 0, 0, 0]
@@ -371,6 +371,6 @@ def test_where_methods_fail_one_sector_and_no_mdp_over_predict() -> None:
     q = MaxDisturbance(d, commands=examples.TENDON_FORCE, cap=100.0)
     assert solve(g, q, method="no_mdp").value >= 20 * fine.value
     assert fine.value == pytest.approx(solve(g, q, method="iterative").value, rel=0.01)
-    exact = solve(g, q, method="spatial")  # the exact problem, globally
+    exact = solve(g, q, method="exact")  # the exact problem, globally
     assert exact.status == "solved" and fine.value == pytest.approx(exact.value, rel=0.01)
     assert coarse.value >= 20 * exact.value

@@ -1,0 +1,43 @@
+"""``python -m stability.bench planar|mip|refinement|grasps|tradeoff [options]``: parses the
+command line and runs one benchmark (``cli(args)`` of the module of that name)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m stability.bench",
+        description=importlib.import_module("stability.bench").__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument("which", choices=BENCHMARKS, help="benchmark to run")
+    ap.add_argument("--max-levels", type=int, default=9,
+                    help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="seconds per query (default: refinement 120, grasps 60, "
+                    "tradeoff 60)")  # fmt: skip
+    ap.add_argument("--directions", type=int, default=10,
+                    help="grasps: max-disturbance directions per grasp")  # fmt: skip
+    ap.add_argument("--wrenches", type=int, default=10,
+                    help="grasps: optimal-commands wrenches per grasp")  # fmt: skip
+    ap.add_argument("--only", default=None,
+                    help="grasps: labels to run (e.g. 'abe'); tradeoff: query indices")  # fmt: skip
+    ap.add_argument("--out", default="bench_out", help="folder for the CSV and PNG")
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
+    ap.add_argument("--seed", type=int, default=0)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parser().parse_args(argv)
+    importlib.import_module(f"stability.bench.{args.which}").cli(args)
+
+
+if __name__ == "__main__":
+    main()

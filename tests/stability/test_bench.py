@@ -1,0 +1,85 @@
+"""``python -m stability.bench planar|mip|refinement|grasps|tradeoff``: the command line,
+and a tiny run of each benchmark (its CSV and PNG written, the CSV's columns)."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from stability.bench import mip, planar, tradeoff
+from stability.bench.__main__ import BENCHMARKS, main
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def _run(name: str, out: Path, *options: str) -> list[dict[str, str]]:
+    main([name, "--out", str(out), *options])
+    assert (out / f"{name}.png").stat().st_size > 0
+    return _rows(out / f"{name}.csv")
+
+
+def test_command_line() -> None:
+    """``--help`` names every benchmark; an unknown one is a usage error (exit 2)."""
+    run = [sys.executable, "-m", "stability.bench"]
+    ok = subprocess.run([*run, "--help"], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert all(name in ok.stdout for name in BENCHMARKS)
+    for option in ("--max-levels", "--time-limit", "--directions", "--wrenches", "--only",
+                   "--out", "--repeats", "--seed"):  # fmt: skip
+        assert option in ok.stdout
+    bad = subprocess.run([*run, "nope"], cwd=ROOT, capture_output=True, text=True)
+    assert bad.returncode == 2 and "invalid choice" in bad.stderr
+
+
+def test_planar(tmp_path, monkeypatch) -> None:
+    monkeypatch.setattr(planar, "MS", [2, 3])
+    rows = _run("planar", tmp_path, "--repeats", "1")
+    assert [int(r["m"]) for r in rows] == [2, 3]
+    assert [int(r["faces"]) for r in rows] == [10, 26]  # the thesis' #S
+    assert [int(r["thesis_states"]) for r in rows] == [10, 26]
+
+
+def test_mip(tmp_path, monkeypatch) -> None:
+    real = mip._cases
+    monkeypatch.setattr(mip, "_cases", lambda rng, repeats: real(rng, repeats)[:1])  # pinch
+    rows = _run("mip", tmp_path, "--repeats", "1")
+    assert len(rows) == 2 * len(mip.METHODS) * len(mip.BACKENDS)
+    assert {r["case"] for r in rows} == {"pinch"}
+    assert all(r["backends_agree"] == "1/1" for r in rows)
+
+
+def test_refinement(tmp_path) -> None:
+    rows = _run("refinement", tmp_path, "--max-levels", "0", "--time-limit", "60")
+    assert len(rows) == 1 and rows[0]["equivalent_edges"] == "4"
+    assert float(rows[0]["value"]) == pytest.approx(float(rows[0]["full_value"]))
+
+
+def test_grasps(tmp_path) -> None:
+    rows = _run("grasps", tmp_path, "--only", "a", "--directions", "1", "--wrenches", "1",
+                "--time-limit", "60")  # fmt: skip
+    assert [r["task"] for r in rows] == ["check", "max_disturbance", "optimal_commands"]
+    assert {r["grasp"] for r in rows} == {"a"} and {r["contacts"] for r in rows} == {"3"}
+    assert rows[0]["status"] == "solved" and rows[0]["certified"] in ("True", "False", "")
+
+
+def test_tradeoff(tmp_path, monkeypatch) -> None:
+    """Two queries (the pinch, the embedded three-contact grasp along +y) and four
+    settings; the error is measured against ``exact``, whose own error is 0."""
+    keep = {"planar", "gws", "no_mdp", "exact"}
+    real = tradeoff.settings
+    monkeypatch.setattr(tradeoff, "settings", lambda: [s for s in real() if s[0] in keep])
+    rows = _run("tradeoff", tmp_path, "--only", "03", "--time-limit", "60")
+    got = {(r["query"], r["setting"]) for r in rows}
+    assert ("pinch +z", "exact") in got and ("three (0.0, 1.0, 0.0)", "planar") in got
+    assert ("pinch +z", "planar") not in got  # planar answers the embedded queries only
+    assert all(float(r["error"]) == 0.0 for r in rows if r["setting"] == "exact")
+    back = tradeoff.read_tradeoff(tmp_path / "tradeoff.csv")
+    assert [r["setting"] for r in back] == [r["setting"] for r in rows]
