@@ -62,12 +62,12 @@ import numpy as np
 
 from envs.four_finger import (
     FRAME_SKIP,
-    SOLVERS,
     TIMESTEP,
     FourFingerRotate,
-    _Physics,
+    Physics,
     grasp_cache,
-    yaw_rate,
+    policy_step_outcomes,
+    save_state,
 )
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
@@ -106,8 +106,8 @@ def make(level: int) -> FourFingerRotate:
     timestep, frame_skip = (0.0025, 20) if level >= 10 else (TIMESTEP, FRAME_SKIP)
     env = FourFingerRotate(torsional=level >= 7, timestep=timestep, frame_skip=frame_skip)
     if level <= 8:  # the scene's own contacts (broadphase)
-        env._ph = _Physics("sphere", True, timestep, torsional=level >= 7, explicit_pairs=False)
-        env.model, env.data = env._ph.model, env._ph.data
+        env.physics = Physics("sphere", True, timestep, torsional=level >= 7, explicit_pairs=False)
+        env.model, env.data = env.physics.model, env.physics.data
     m = env.model
     if level <= 7:
         m.opt.tolerance = 1e-8  # MuJoCo's default
@@ -126,7 +126,7 @@ def make(level: int) -> FourFingerRotate:
         m.opt.noslip_iterations = 20
         m.opt.impratio = 1.0
     if level <= 5:
-        env._observe = _slow_observe(env)  # type: ignore[method-assign]
+        env.observe = _slow_observe(env)  # type: ignore[method-assign]
     return env
 
 
@@ -190,45 +190,6 @@ FIDELITY = (  # label, timestep [s], substeps, solver, tolerance
 )
 
 
-STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
-
-
-def save_state(env: FourFingerRotate) -> np.ndarray:
-    """The env's full physics state and setpoints (:data:`STATE_SPEC`), for
-    :func:`policy_step_outcomes`."""
-    s = np.empty(mujoco.mj_stateSize(env.model, STATE_SPEC))
-    mujoco.mj_getState(env.model, env.data, s, STATE_SPEC)
-    return s
-
-
-def policy_step_outcomes(
-    env: FourFingerRotate,
-    states: Sequence[np.ndarray],
-    timestep: float,
-    substeps: int,
-    solver: str,
-    tol: float,
-) -> np.ndarray:
-    """One policy step (``substeps`` x ``timestep``, ``solver`` to tolerance ``tol``) from each
-    of ``states`` (:func:`save_state`), in ``env``'s model (its options are left so): per
-    state the object's yaw rate [rad/s], its position x, y, z [mm] and the observed link
-    normal forces (8) [N] at the end."""
-    m, d, ph = env.model, env.data, env._ph
-    m.opt.timestep, m.opt.tolerance = timestep, tol
-    m.opt.solver = SOLVERS[solver]
-    m.opt.iterations = 1000 if tol < 1e-10 else 100
-    out = []
-    for s in states:
-        mujoco.mj_setState(m, d, s, STATE_SPEC)
-        mujoco.mj_forward(m, d)
-        q0 = ph.object_quat().copy()
-        mujoco.mj_step(m, d, nstep=substeps)
-        _, fn, _ = ph.link_contacts()
-        rate = yaw_rate(q0, ph.object_quat(), timestep * substeps)
-        out.append([rate, *(ph.object_pos() * 1e3), *fn])
-    return np.array(out)
-
-
 def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, object]]:
     """What the policy sees under coarser physics: from states of the shipped policy's
     rollouts (every ``every``-th step of ``episodes`` episodes, with that step's action
@@ -241,7 +202,7 @@ def timestep_fidelity(episodes: int = 12, every: int = 4) -> list[dict[str, obje
 
     act, kw = load_policy(POLICY)
     env = FourFingerRotate(**kw)
-    d, ph = env.data, env._ph
+    d, ph = env.data, env.physics
     states = []
     for ep in range(episodes):
         obs, _ = env.reset(seed=ep)

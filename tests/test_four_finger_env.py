@@ -200,7 +200,7 @@ def test_no_contact_gives_zeros(env) -> None:
     m, d = env.model, env.data
     d.qpos[ff.NQ : ff.NQ + 3] = [0.0, 0.0, 0.5]  # object lifted clear of the hand
     mujoco.mj_forward(m, d)
-    obs = env._observe()
+    obs = env.observe()
     assert d.ncon == 0 or all(
         m.body("object").id not in (m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2])
         for c in d.contact[: d.ncon]
@@ -272,10 +272,10 @@ def test_solver_tolerance_changes_nothing_the_policy_sees() -> None:
     changes (median and largest); 8 cached grasps held 10 s with zero actions end within
     0.01 rad (1e-3 rad/s of creep, 0.2 % of the rotation target) and 0.2 mm of the 1e-8
     hold. (1e-2 fails both, 1e-3 the first.)"""
-    from envs.bench import policy_step_outcomes, save_state
+    from envs.four_finger import policy_step_outcomes, save_state
 
     e = FourFingerRotate()
-    m, d, ph = e.model, e.data, e._ph
+    m, d, ph = e.model, e.data, e.physics
     rng = np.random.default_rng(3)
     states = []
     for ep in range(4):
@@ -321,10 +321,10 @@ def test_explicit_pairs_simulate_the_scene_unchanged(obj) -> None:
     for bit as the scene's own broadphase (600 policy steps). From the same state
     each policy step, with random setpoints large enough to reach finger-finger, palm and
     catch-plane contacts."""
-    from envs.four_finger import _Physics
+    from envs.four_finger import Physics
 
-    new = _Physics(obj, True, TIMESTEP)
-    old = _Physics(obj, True, TIMESTEP, explicit_pairs=False)
+    new = Physics(obj, True, TIMESTEP)
+    old = Physics(obj, True, TIMESTEP, explicit_pairs=False)
     assert new.model.npair == 34 and old.model.npair == 0  # 10 with the object, 24 cross-finger
     assert new.model.opt.integrator == old.model.opt.integrator
     assert not new.model.geom_contype.any() and not new.model.geom_conaffinity.any()
@@ -361,11 +361,11 @@ def test_explicit_pairs_simulate_the_scene_unchanged(obj) -> None:
 
 @pytest.mark.parametrize("filterparent", [True, False])
 def test_dynamic_pairs_are_the_pairs_mujoco_collides(filterparent) -> None:
-    """envs.four_finger._dynamic_pairs against MuJoCo's own broadphase on a model where every
+    """envs.four_finger.dynamic_pairs against MuJoCo's own broadphase on a model where every
     geom overlaps every other: a jointed chain (parent-child), a body welded to its parent,
     a free body, an <exclude>, contype/conaffinity that rule pairs out, with and without
     the filterparent rule. Scenes with mocap bodies are refused."""
-    from envs.four_finger import _dynamic_pairs
+    from envs.four_finger import dynamic_pairs
 
     flag = "" if filterparent else '<option><flag filterparent="disable"/></option>'
     xml = f"""<mujoco>{flag}<worldbody>
@@ -383,17 +383,17 @@ def test_dynamic_pairs_are_the_pairs_mujoco_collides(filterparent) -> None:
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     got = {tuple(sorted(p)) for p in d.contact.geom.tolist()}
-    assert got == set(_dynamic_pairs(m))
+    assert got == set(dynamic_pairs(m))
     assert len(got) >= 5
     mocap = xml.replace('<body name="e"><freejoint/>', '<body name="e" mocap="true">')
     with pytest.raises(FourFingerError, match="mocap"):
-        _dynamic_pairs(mujoco.MjModel.from_xml_string(mocap))
+        dynamic_pairs(mujoco.MjModel.from_xml_string(mocap))
 
 
 def test_mixed_contact_parameters_are_mujocos() -> None:
-    """envs.four_finger._mixed_contact against what MuJoCo puts on a dynamic contact, for
+    """envs.four_finger.mixed_contact against what MuJoCo puts on a dynamic contact, for
     geoms of equal and of different priority, solmix weights and both solref formats."""
-    from envs.four_finger import _mixed_contact
+    from envs.four_finger import mixed_contact
 
     cases = [
         ('priority="1" friction="0.7 0.01 0.001" condim="3"', 'friction="1.2 0.02 0" condim="6"'),
@@ -411,7 +411,7 @@ def test_mixed_contact_parameters_are_mujocos() -> None:
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         assert d.ncon == 1
-        c, want = d.contact[0], _mixed_contact(m, 0, 1)
+        c, want = d.contact[0], mixed_contact(m, 0, 1)
         assert c.dim == want["condim"]
         np.testing.assert_allclose(c.friction, want["friction"], rtol=1e-12)
         np.testing.assert_allclose(c.solref, want["solref"], rtol=1e-12)
@@ -419,7 +419,7 @@ def test_mixed_contact_parameters_are_mujocos() -> None:
     # margins and gaps: mixed differently by MuJoCo versions, refused
     m = mujoco.MjModel.from_xml_string(xml.replace('size="0.05"', 'size="0.05" margin="0.01"'))
     with pytest.raises(FourFingerError, match="margin or gap"):
-        _mixed_contact(m, 0, 1)
+        mixed_contact(m, 0, 1)
 
 
 def test_drop_terminates_with_the_penalty() -> None:
@@ -464,9 +464,9 @@ def test_grasp_cache_is_varied_and_reloads(tmp_path, monkeypatch) -> None:
     assert np.ptp(c.ctrl[:, 1::3] - c.qpos[:, 1:12:3]) > 0.02  # flexion squeeze varies
     grasps = grasp_cache("cylinder", False, 6)
     assert (tmp_path / "grasps").is_dir() and len(list((tmp_path / "grasps").glob("*.npz"))) == 1
-    from envs import four_finger
+    from envs.four_finger import cache
 
-    four_finger._MEMORY.clear()
+    cache._MEMORY.clear()  # white-box: force the disk read
     again = grasp_cache("cylinder", False, 6)
     np.testing.assert_array_equal(grasps.qpos, again.qpos)
     e = FourFingerRotate(object="cylinder", gravity=False, n_grasps=6)
