@@ -56,7 +56,7 @@ at all.
 States and actions of ``--episodes`` rollouts of ``--steps`` steps per source (``random``:
 uniform random actions; ``policy``: the policy's actions); the rollouts execute the DAQP
 shield's action, so the states are those the shield meets in use. At each state both
-backends (``daqp``, ``osqp``; one :class:`shields.grasp.GraspQP` each) shield the same action
+backends (``daqp``, ``osqp``; one :class:`shields.qp.GraspQP` each) shield the same action
 ``--repeats`` times in the order ``A B B A ...`` (``A`` alternates between states), so that
 a drift of the machine's load hits both. The time is ``ShieldResult.solve_time_s``: the
 whole shield call, linearisation and force-closure subset enumeration included. Grouped by
@@ -127,7 +127,7 @@ from envs.four_finger import CONTACT_LINKS, FourFingerRotate
 from ihm.contacts import body_subtree
 from ihm.hands.four_finger import ACTUATOR_NAMES
 from shields.compliance import GraspLinearization, linearize
-from shields.grasp import BACKENDS, STATUSES, GraspQP, ShieldLimits
+from shields.qp import BACKENDS, STATUSES, GraspQP, ShieldLimits
 from shields.wrappers import GraspShield
 
 __all__ = [
@@ -231,7 +231,7 @@ def cone_ratios(data: mujoco.MjData, contact_ids: Sequence[int]) -> NDArray[np.f
 
 
 def links_outside(prob: Any) -> int:
-    """Touching links of a :class:`shields.grasp.ShieldProblem` whose contacts already
+    """Touching links of a :class:`shields.qp.ShieldProblem` whose contacts already
     violate their rows at the zero action: a normal force below ``c_min`` or a force outside
     the inscribed friction pyramid (a contact sliding on MuJoCo's cone is outside it)."""
     if prob is None or not prob.groups:
@@ -937,7 +937,7 @@ def run_effect(
     """The ``effect`` measurement (module docstring): one row per episode, written to
     ``out/shield_effect.csv``; summary ``shield_effect_summary.csv``; chart
     ``shield_effect.png`` (``shield_effect_relaxed*``, ``shield_effect_soft*`` with
-    ``relax_contacts``, ``soft_closure``: those :class:`shields.grasp.ShieldLimits`
+    ``relax_contacts``, ``soft_closure``: those :class:`shields.qp.ShieldLimits`
     options). Returns the rows."""
     name = effect_name(relax_contacts, soft_closure)
     limits = ShieldLimits(relax_contacts=relax_contacts, soft_closure=soft_closure)

@@ -16,7 +16,7 @@ import pytest
 
 from envs.four_finger import FourFingerRotate
 from shields import bench
-from shields.grasp import BACKENDS, STATUSES
+from shields.qp import BACKENDS, STATUSES
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -52,7 +52,7 @@ import rerun.blueprint as rrb
 
 from ihm.hands.four_finger import ACTUATOR_NAMES, NU
 from ihm.rerun_log import SceneRecorder
-from shields.grasp import BACKENDS
+from shields.qp import BACKENDS
 from train.gait import SHIPPED, load_policy
 from train.ppo import build_parser, opt
 from train.rotate import RotateConfig, make_env

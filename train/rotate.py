@@ -46,7 +46,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FRAME_SKIP, OBJECTS, TIMESTEP, grasp_cache
 from shields import GraspShield
-from shields.grasp import BACKENDS
+from shields.qp import BACKENDS
 from train.pipeline import PipelinedPPO
 from train.ppo import (
     build_parser,

@@ -233,6 +233,11 @@ class ShieldProblem:
         self._closure[mask] = ok
         return ok
 
+    def known_closure(self, mask: int) -> bool:
+        """Whether :meth:`closure` has found the link set ``mask`` in force closure (its memo
+        only: tests nothing new)."""
+        return self._closure.get(mask, False)
+
     def link_sets(self) -> list[int]:
         """Bit masks of the link sets that could be in force closure (:meth:`_possible`), the
         largest first."""
@@ -552,7 +557,7 @@ class GraspQP:
             )
             if better and prob.closure(mask):
                 best_x, best_mask, best_obj, best_viol = x, mask, obj, viol
-        cands = sum(1 for mask in sets if prob._closure.get(mask, False))
+        cands = sum(1 for mask in sets if prob.known_closure(mask))
         if best_x is None:
             return done(np.zeros(self.l), "fallback", 0, cands, qps, 0.0)
         return done(best_x, "corrected", best_mask, cands, qps, best_viol)
