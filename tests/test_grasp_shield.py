@@ -16,7 +16,8 @@ from stable_baselines3.common.vec_env import SubprocVecEnv
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FourFingerError, FourFingerRotate
 from shields import GraspShield, ShieldError, ShieldLimits
-from shields.qp import STATUSES, GraspQP, force_closure_wrenches, tilt_angles
+from shields.force_closure import force_closure_wrenches
+from shields.qp import STATUSES, GraspQP, tilt_angles
 from stability import Grasp, gws
 
 INFO_KEYS = (
