@@ -44,7 +44,7 @@ is below 1e-12). Flags: ``same_contacts`` (the hand bodies touching the object, 
 multiplicity, are the same at ``s`` and after the zero, ``dq`` and ``2 dq`` steps; otherwise
 forces are compared on the bodies present in all four), ``clipped`` (a ctrlrange bound
 changed ``dq`` or ``2 dq``) and ``linear`` (MuJoCo's own response is linear, as in
-tests/test_compliance.py: ``|dc(2 dq) - 2 dc(dq)| <= 0.1 |dc(2 dq)|``, and not clipped).
+tests/shields/test_compliance.py: ``|dc(2 dq) - 2 dc(dq)| <= 0.1 |dc(2 dq)|``, and not clipped).
 ``sliding_base``: after the zero-action step some finger contact is on the friction cone (a
 slip event, see ``effect``); ``starts_sliding``: after the ``dq`` or the ``2 dq`` step one is
 and after the zero-action step none is. The "filtered" columns of the summary keep the

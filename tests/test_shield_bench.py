@@ -48,7 +48,7 @@ def test_accuracy_on_settled_grasps(tmp_path: Path) -> None:
     # a settled grasp keeps its contacts after 0.01 rad, and MuJoCo answers mostly linearly
     assert all(r["same_contacts"] for r in servo)
     assert np.mean([r["linear"] for r in servo]) > 0.3
-    # the linearisation predicts MuJoCo's change (tests/test_compliance.py: 0.14 / 0.19)
+    # the linearisation predicts MuJoCo's change (tests/shields/test_compliance.py: 0.14 / 0.19)
     assert np.median([r["err_force"] for r in servo]) < 0.5
     assert np.median([r["err_pos"] for r in servo]) < 0.5
     assert np.median([r["err_rot"] for r in servo]) < 0.5

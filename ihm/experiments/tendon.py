@@ -61,7 +61,7 @@ __all__ = [
 SCENE = "tendon_box"
 #: tendon force of the one actively loaded tendon [N]. The distal-only preload holds the
 #: box only while the box's weight (0.98 N, out of the hand) balances the distal tips'
-#: push toward the palm: up to about 5 N (tests/test_tendon_gripper.py); 4 N keeps a margin.
+#: push toward the palm: up to about 5 N (tests/ihm/test_tendon_gripper.py); 4 N keeps a margin.
 FORCE_N = 4.0
 #: light closing commands (proximal, distal) [N] before the ratchet goes on (gravity off)
 SEAT_N = (1.0, 0.25)

@@ -16,7 +16,7 @@ from ihm.resistance import simulated_resistance
 from stability import GraspError
 from stability.examples import PINCH_LEVER, PINCH_MAX_Z, PINCH_MU, PINCH_TORQUE
 
-PINCH = Path(__file__).resolve().parents[1] / "assets" / "analytic" / "pinch.xml"
+PINCH = Path(__file__).resolve().parents[2] / "assets" / "analytic" / "pinch.xml"
 
 
 def _pinch(torque: float = PINCH_TORQUE, settle_steps: int = 500, away: bool = False):
@@ -139,7 +139,7 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
 
     from ihm.sim_maps import simulated_map
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root), "MPLBACKEND": "Agg"}
     args = ["barrett_box", "--directions", "4", "--cap", "3", "--no-progress"]
     p = subprocess.run(
@@ -270,7 +270,7 @@ def test_experiments_cli_rejects_unknown_names() -> None:
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     q = subprocess.run([sys.executable, "-m", "ihm.experiments", "nope"], cwd=root,
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert q.returncode == 2 and "unknown experiment 'nope'" in q.stderr
