@@ -1,6 +1,6 @@
 """Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PNG``.
 
-Groups run directories of :mod:`train.rotate` (``python -m train.ppo``) by their shield
+Groups run directories of :mod:`train.rotation` (``python -m train.ppo``) by their shield
 (``config.json``: ``none`` or ``qp``) and charts, over env steps, the training episode
 return (64-step episodes, each run's moving mean over ``--window`` episodes, binned
 to a common step grid) and the periodic evaluations (deterministic policy, 20 s episodes:
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from train.rotate import _monitor_returns
+from train.rotation import monitor_returns
 
 __all__ = ["load_run", "main", "summarise"]
 
@@ -34,7 +34,7 @@ def load_run(run_dir: Path) -> dict:
     if not cfg_file.is_file():
         raise SystemExit(f"{run_dir}: not a training run directory (no config.json)")
     cfg = json.loads(cfg_file.read_text())
-    steps, ret = _monitor_returns(run_dir)
+    steps, ret = monitor_returns(run_dir)
     evals: list[dict[str, float]] = []
     ev = run_dir / "eval.csv"
     if ev.is_file():

@@ -70,7 +70,7 @@ def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
 def test_train_timestep_option_keeps_the_policy_period() -> None:
     """``python -m train.ppo --timestep``: the env runs 0.05 s / timestep substeps (a 20 Hz
     policy either way), and a timestep that does not divide 0.05 s is refused."""
-    from train.rotate import env_physics, make_env, parse_config
+    from train.rotation import env_physics, make_env, parse_config
 
     cfg = parse_config(["--timestep", "0.0025"])
     env = make_env(cfg)()
@@ -82,7 +82,7 @@ def test_train_timestep_option_keeps_the_policy_period() -> None:
     with pytest.raises(ValueError, match="divide"):
         env_physics(0.0)
     # a run's physics travels with its policy (config.json); runs before the option: 2 ms
-    from train.gait import SHIPPED, load_policy
+    from train.policy import SHIPPED, load_policy
 
     for name, physics in (
         ("four_finger_sphere", (0.002, 25)),
