@@ -13,7 +13,6 @@ over the last 10 % of its training episodes) and prints the table.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -23,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stability.cli import ArgumentParser
+from stability.io import write_csv
 from train.rotation import monitor_returns
 
 __all__ = ["load_run", "main", "summarise"]
@@ -118,7 +119,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
 
 def main(argv: Sequence[str] | None = None) -> list[dict]:
     """Parse, load, chart, write the CSV; returns the summary rows."""
-    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p = ArgumentParser(prog="python -m train.compare", description=(__doc__ or "").split("\n\n")[0])
     p.add_argument("runs", nargs="+", type=Path, help="run directories")
     p.add_argument("--out", type=Path, required=True, help="output path without suffix")
     p.add_argument("--window", type=int, default=100, help="episodes in the moving mean")
@@ -131,10 +132,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict]:
     rows = [summarise(r) for r in runs]
     rows.sort(key=lambda r: (r["shield"], r["seed"]))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    with args.out.with_suffix(".csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out.with_suffix(".csv"), rows, columns=list(rows[0]))
     _plot(runs, args.out.with_suffix(".png"), args.window)
     cols = list(rows[0])
     print(" | ".join(cols))
