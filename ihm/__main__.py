@@ -234,11 +234,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    from .maps import MapError, _check, run
+    from .sim_maps import MapError, check_options, run
 
     try:
         for method in args.method:
-            _check(args.plane, method, args.directions, args.workers, args.cap, args.frame)
+            check_options(args.plane, method, args.directions, args.workers, args.cap, args.frame)
         preloads = args.preload or [None]
         opts: dict[str, float] = {} if args.time_limit is None else {"time_limit": args.time_limit}
         if args.normal_uncertainty is not None:

@@ -47,6 +47,7 @@ from stability import Grasp, GraspError
 __all__ = [
     "SceneGrasp",
     "body_subtree",
+    "contact_frame_force",
     "grasp_from_mujoco",
     "hand_coordinates",
     "transmission",
@@ -209,10 +210,12 @@ def transmission(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float
     return dense
 
 
-def _contact_frame_force(
+def contact_frame_force(
     model: mujoco.MjModel, data: mujoco.MjData, i: int, object_is_geom1: bool
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(frame rows n, t1, t2 with n into the object; force of hand on object in it)."""
+    """Contact ``i``'s frame (rows n, t1, t2, with n pointing into the object) and the force of
+    the hand on the object in it (``mj_contactForce``); ``object_is_geom1``: the object is
+    the contact's first geom."""
     con = data.contact[i]
     frame = con.frame.reshape(3, 3).copy()
     f6 = np.zeros(6)
@@ -271,7 +274,7 @@ def grasp_from_mujoco(
                 "rolling friction is not in the point-contact model; use condim 1 or 3"
             )
         obj_first = bool(in_obj[b1])
-        frame, force = _contact_frame_force(model, data, i, obj_first)
+        frame, force = contact_frame_force(model, data, i, obj_first)
         hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
         pos = con.pos.copy()
         for g in groups:

@@ -17,7 +17,7 @@ torque closes); ``sign=-1`` flips it. The limit is made stiff: ``solref`` with t
 constant ``2 * timestep`` (the smallest that MuJoCo's ``refsafe`` allows) and damping ratio
 1, ``solimp`` 0.99/0.999: on the analytic pinch (``assets/analytic/pinch.xml``, 1 ms) an
 opening load of 0.5 N m on an unpowered finger gives way by 1.4e-4 rad, where without the
-ratchet the finger swings open (tests/test_resistance.py). Coupled joints (the Barrett
+ratchet the finger swings open (tests/ihm/test_resistance.py). Coupled joints (the Barrett
 distal joints, tied to the proximal by an equality) are held through their coupling and
 need no ratchet of their own.
 """

@@ -102,7 +102,7 @@ def _gl_context_class(backend: str) -> Iterator[None]:
         gl_context.GLContext = saved
 
 
-def _make_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
+def make_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
     backend = _gl_backend()
     try:
         with _gl_context_class(backend):
@@ -348,7 +348,7 @@ def render_png(
     path = Path(path)
     obj = _object_body(model, grasp)
     with _visual_settings(model, width, height):
-        renderer = _make_renderer(model, width, height)
+        renderer = make_renderer(model, width, height)
         try:
             opt = mujoco.MjvOption()
             mujoco.mjv_defaultOption(opt)

@@ -36,7 +36,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import ArrayLike, NDArray
 
-from .contacts import SceneGrasp, _contact_frame_force
+from .contacts import SceneGrasp, contact_frame_force
 
 __all__ = ["ObjectContacts", "SceneRecorder", "log_scene", "object_contacts"]
 
@@ -146,7 +146,7 @@ def object_contacts(
         b1, b2 = int(model.geom_bodyid[con.geom1]), int(model.geom_bodyid[con.geom2])
         if (b1 == obj) == (b2 == obj):  # neither, or the object with itself
             continue
-        frame, c = _contact_frame_force(model, data, i, object_is_geom1=b1 == obj)
+        frame, c = contact_frame_force(model, data, i, object_is_geom1=b1 == obj)
         points.append(con.pos.copy())
         forces.append(frame.T @ c)
         bodies.append(_body_name(model, b2 if b1 == obj else b1))

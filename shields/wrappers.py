@@ -39,8 +39,8 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from shields.grasp import GraspQP, ShieldLimits, ShieldResult
-from shields.islands import simple_shield, smart_shield
+from shields.islands_shields import simple_shield, smart_shield
+from shields.qp import GraspQP, ShieldLimits, ShieldResult
 
 __all__ = ["GraspShield", "SimpleShield", "SmartShield"]
 
@@ -101,7 +101,7 @@ class SimpleShield(_ShieldWrapper):
     _required = ("state", "predict", "safe_distance")
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
-        """See :func:`shields.islands.simple_shield`."""
+        """See :func:`shields.islands_shields.simple_shield`."""
         u = self.env.unwrapped
         return simple_shield(u.state, action, u.predict, u.safe_distance)
 
@@ -109,7 +109,7 @@ class SimpleShield(_ShieldWrapper):
 class SmartShield(_ShieldWrapper):
     """Thesis ``Psi_smart``: ``a~ = argmin ||a~ - clip(a)|| s.t. M(s + k a~) >= 0, a~ in the
     action box`` -- the safe action nearest to the clipped one, computed exactly
-    (:func:`shields.islands.smart_shield`).
+    (:func:`shields.islands_shields.smart_shield`).
 
     Needs a 2D Box action space and ``state``, ``predict``, ``safe_distance``, ``safe_pieces``,
     ``action_scale`` on ``env.unwrapped`` (affine model ``predict(s, a) = s + k clip(a)``);
@@ -126,7 +126,7 @@ class SmartShield(_ShieldWrapper):
             )
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
-        """See :func:`shields.islands.smart_shield`."""
+        """See :func:`shields.islands_shields.smart_shield`."""
         u = self.env.unwrapped
         return smart_shield(
             u.state, action, u.safe_pieces, float(u.action_scale), self._low, self._high
@@ -134,7 +134,7 @@ class SmartShield(_ShieldWrapper):
 
 
 class GraspShield(_ShieldWrapper):
-    """The linearised-compliance QP shield (:class:`shields.grasp.GraspQP`) around the
+    """The linearised-compliance QP shield (:class:`shields.qp.GraspQP`) around the
     four-finger env (``ihm/FourFingerRotate-v0`` or any env whose ``unwrapped`` exposes
     ``model``, ``data``, ``max_setpoint_step`` [rad] and ``dt`` [s]).
 
@@ -145,7 +145,7 @@ class GraspShield(_ShieldWrapper):
     - ``shield_correction``: ``||a~ - clip(a)||``,
     - ``shield_subset``: the shielded links (tuple of MJCF body names),
     - ``shield_status``: ``"safe"``, ``"corrected"``, ``"fallback"`` or ``"no_closure"``
-      (:mod:`shields.grasp`),
+      (:mod:`shields.qp`),
     - ``shield_solve_time_s``: the shield's wall time for this step [s].
 
     ``shield_intervened`` is True for ``"corrected"`` and ``"fallback"``. The shield never
@@ -156,7 +156,7 @@ class GraspShield(_ShieldWrapper):
     ----------
     env : the env.
     backend : QP backend, ``"daqp"`` (default, faster) or ``"osqp"``.
-    limits : :class:`shields.grasp.ShieldLimits` (``c_min``, friction pyramid edges, object
+    limits : :class:`shields.qp.ShieldLimits` (``c_min``, friction pyramid edges, object
         box and tilt).
     """
 
@@ -177,7 +177,7 @@ class GraspShield(_ShieldWrapper):
         self.last_result: ShieldResult | None = None
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
-        """``(a~, intervened)`` from :class:`shields.grasp.GraspQP` at the current state."""
+        """``(a~, intervened)`` from :class:`shields.qp.GraspQP` at the current state."""
         if not np.all(np.isfinite(action)):
             return np.asarray(action, dtype=np.float64), False  # the env raises its error
         res = self.qp(self.env.unwrapped.data, action)

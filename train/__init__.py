@@ -1,2 +1,14 @@
-"""Training scripts: ``python -m train.ppo`` (PPO on a shielded env) and
-``python -m train.islands`` (the islands-and-bridges benchmark)."""
+"""Training and everything that loads a trained policy (the top layer: nothing imports it).
+
+Commands: ``python -m train.ppo`` (the four-finger rotation main job; ``islands``: PPO on
+the islands-and-bridges toy), ``python -m train.islands`` (the islands benchmark),
+``python -m train.rollout`` (recorded episodes), ``python -m train.gait`` (gait strip),
+``python -m train.compare`` (runs side by side), ``python -m train.bench <name>`` (training,
+fidelity, transfer and QP shield benchmarks).
+
+Modules: :mod:`~train.sb3` (SB3 plumbing the trainers share), :mod:`~train.rotation` and
+:mod:`~train.islands_ppo` (the trainers), :mod:`~train.evaluation` (the one evaluation
+loop), :mod:`~train.policy` (loading and evaluating shipped policies),
+:mod:`~train.seeding`, :mod:`~train.stats`, :mod:`~train.vec` and :mod:`~train.pipeline`
+(seeds, intervals, worker processes, pipelined rollouts).
+"""

@@ -1,6 +1,6 @@
 """Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PNG``.
 
-Groups run directories of :mod:`train.rotate` (``python -m train.ppo``) by their shield
+Groups run directories of :mod:`train.rotation` (``python -m train.ppo``) by their shield
 (``config.json``: ``none`` or ``qp``) and charts, over env steps, the training episode
 return (64-step episodes, each run's moving mean over ``--window`` episodes, binned
 to a common step grid) and the periodic evaluations (deterministic policy, 20 s episodes:
@@ -13,7 +13,6 @@ over the last 10 % of its training episodes) and prints the table.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -23,7 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from train.rotate import _monitor_returns
+from stability.cli import ArgumentParser
+from stability.io import write_csv
+from train.rotation import monitor_returns
 
 __all__ = ["load_run", "main", "summarise"]
 
@@ -34,7 +35,7 @@ def load_run(run_dir: Path) -> dict:
     if not cfg_file.is_file():
         raise SystemExit(f"{run_dir}: not a training run directory (no config.json)")
     cfg = json.loads(cfg_file.read_text())
-    steps, ret = _monitor_returns(run_dir)
+    steps, ret = monitor_returns(run_dir)
     evals: list[dict[str, float]] = []
     ev = run_dir / "eval.csv"
     if ev.is_file():
@@ -118,7 +119,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
 
 def main(argv: Sequence[str] | None = None) -> list[dict]:
     """Parse, load, chart, write the CSV; returns the summary rows."""
-    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p = ArgumentParser(prog="python -m train.compare", description=(__doc__ or "").split("\n\n")[0])
     p.add_argument("runs", nargs="+", type=Path, help="run directories")
     p.add_argument("--out", type=Path, required=True, help="output path without suffix")
     p.add_argument("--window", type=int, default=100, help="episodes in the moving mean")
@@ -131,10 +132,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict]:
     rows = [summarise(r) for r in runs]
     rows.sort(key=lambda r: (r["shield"], r["seed"]))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    with args.out.with_suffix(".csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out.with_suffix(".csv"), rows, columns=list(rows[0]))
     _plot(runs, args.out.with_suffix(".png"), args.window)
     cols = list(rows[0])
     print(" | ".join(cols))

@@ -7,59 +7,21 @@ estimates the gait period from the autocorrelation of the actuator setpoints
 (the first peak after lag 0), and renders ``--frames`` evenly spaced frames of
 one period from the side and from the top, as the thesis' gait figures.
 Writes ``--out`` (PNG) and prints the speed over the rollout and the period.
+``--episodes N`` also evaluates the policy (:func:`train.policy.evaluate`).
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from envs.four_finger import GraspCache
+from stability.cli import ArgumentParser
+from train.policy import SHIPPED, evaluate, load_policy
 
-ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ROOT / "policies" / "four_finger_sphere"
-
-
-def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:
-    """A deterministic ``obs -> action`` function and the run's env options.
-
-    ``run_dir`` holds ``policy.pt`` (SB3 ``ActorCriticPolicy.save``) or ``model.zip``, plus
-    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``.
-    """
-    import json
-
-    from stable_baselines3.common.policies import ActorCriticPolicy
-
-    if (run_dir / "policy.pt").is_file():
-        policy = ActorCriticPolicy.load(str(run_dir / "policy.pt"), device="cpu")
-    else:
-        from stable_baselines3 import PPO
-
-        policy = PPO.load(run_dir / "model.zip", device="cpu").policy
-    with (run_dir / "vecnormalize.pkl").open("rb") as f:
-        norm = pickle.load(f)
-    cfg = json.loads((run_dir / "config.json").read_text())
-    mean, var = norm.obs_rms.mean, norm.obs_rms.var
-    clip, eps = norm.clip_obs, norm.epsilon
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        x = np.clip((obs - mean) / np.sqrt(var + eps), -clip, clip).astype(np.float32)
-        a, _ = policy.predict(x, deterministic=True)
-        return a
-
-    from envs.four_finger import TIMESTEP
-    from train.rotate import env_physics
-
-    keys = {"object": "sphere", "gravity": True, "torsional": True}
-    kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
-    return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
+__all__ = ["gait_period", "main", "render_strip", "rollout"]
 
 
 def rollout(
@@ -87,43 +49,6 @@ def rollout(
         "angle": np.array(angle),
         "dropped": np.array(dropped),
         "dt": np.array(env.dt),
-    }
-
-
-def evaluate(
-    act: Callable[[np.ndarray], np.ndarray],
-    env_kwargs: dict,
-    episodes: int,
-    seconds: float,
-    seed: int = 0,
-    start_grasps: GraspCache | None = None,
-) -> dict[str, float]:
-    """Deterministic policy over ``episodes`` episodes of ``seconds`` from start grasps drawn
-    with ``seed``: mean/median speed [rad/s] (turned angle / episode time; a drop ends an
-    episode) and drop rate. ``start_grasps``: a :class:`envs.four_finger.GraspCache` to
-    start from instead of the env's own (the same start states under other physics)."""
-    from envs.four_finger import FourFingerRotate
-
-    env = FourFingerRotate(**env_kwargs)
-    if start_grasps is not None:
-        env.grasps = start_grasps
-    n = int(round(seconds / env.dt))
-    speeds, drops = [], []
-    for ep in range(episodes):
-        obs, _ = env.reset(seed=seed + ep)
-        k, info, term = 0, {"rotation_angle": 0.0}, False
-        while k < n and not term:
-            obs, _, term, _, info = env.step(act(obs))
-            k += 1
-        speeds.append(info["rotation_angle"] / (k * env.dt))
-        drops.append(term)
-    env.close()
-    return {
-        "episodes": episodes,
-        "speed_rad_s": float(np.mean(speeds)),
-        "speed_median_rad_s": float(np.median(speeds)),
-        "speed_p10_rad_s": float(np.percentile(speeds, 10)),
-        "drop_rate": float(np.mean(drops)),
     }
 
 
@@ -190,7 +115,7 @@ def render_strip(
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, float]:
-    p = argparse.ArgumentParser(prog="python -m train.gait", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m train.gait", description=__doc__.split("\n\n")[0])
     p.add_argument("run_dir", nargs="?", default=str(SHIPPED), help="run or policy directory")
     p.add_argument("--seconds", type=float, default=20.0, help="rollout length [s]")
     p.add_argument("--frames", type=int, default=9, help="frames per period (thesis: 9)")

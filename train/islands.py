@@ -1,6 +1,6 @@
 """The islands-and-bridges benchmark (thesis Fig. curves): ``python -m train.islands``.
 
-Trains PPO (:mod:`train.ppo`: same wrapper stack, settings and seeding) for every
+Trains PPO (:mod:`train.islands_ppo`: same wrapper stack, settings and seeding) for every
 configuration and scores it two ways, each with a 95 % Wilson interval
 (:func:`train.stats.wilson_interval`):
 
@@ -58,9 +58,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
-from train.ppo import REWARDS, SHIELDS, Config, build_parser, opt
+from stability.io import write_csv
+from train.evaluation import evaluate_success
+from train.islands_ppo import (
+    REWARDS,
+    SHIELDS,
+    Config,
+    TrainStats,
+    build_envs,
+    build_model,
+    make_eval_envs,
+)
+from train.sb3 import build_parser, normalizer, opt, seed_everything
+from train.seeding import RunSeeds
 from train.stats import wilson_interval
 
 __all__ = [
@@ -71,7 +85,9 @@ __all__ = [
     "BenchConfig",
     "main",
     "plot",
+    "read_csv",
     "run_job",
+    "save_rows",
     "summary_table",
     "training_windows",
 ]
@@ -240,7 +256,7 @@ def training_windows(
 ) -> list[tuple[int, int, int, int]]:
     """Training episodes binned by the step they ended at: ``(end, episodes, successes,
     failures)`` per window ``(end - window, end]``, ``end = window, 2 window, ..., total``
-    (the last window ends at ``total``). ``episodes`` holds :class:`train.ppo.TrainStats`
+    (the last window ends at ``total``). ``episodes`` holds :class:`train.islands_ppo.TrainStats`
     entries ``(step, success, failure, length)``."""
     ends = list(range(window, total, window)) + [total]
     out = []
@@ -278,22 +294,8 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
     ``queue`` (optional) receives the number of training steps done since the last report,
     for the progress bar of the parent process.
     """
-    import torch
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    from train.ppo import (
-        TrainStats,
-        build_envs,
-        build_model,
-        evaluate,
-        make_eval_envs,
-        normalizer,
-        seed_everything,
-    )
-    from train.seeding import RunSeeds
-
     torch.set_num_threads(1)
-    cfg = Config(  # every PPO setting not named here is train.ppo's default
+    cfg = Config(  # every PPO setting not named here is train.islands_ppo's default
         env_id=job["env_id"],
         shield=job["shield"],
         reward=job["reward"],
@@ -335,7 +337,7 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
             if self.num_timesteps >= bc.steps:
                 return False  # stop at the budget, not at the end of the rollout
             if bc.eval_every and self.num_timesteps >= self.next_eval:
-                res = evaluate(model, val_envs, bc.eval_episodes, normalize=norm)
+                res = evaluate_success(model, val_envs, bc.eval_episodes, normalize=norm)
                 wall = time.perf_counter() - t0
                 rows.append(_row(job, "eval_deterministic", self.num_timesteps, res, wall))
                 while self.next_eval <= self.num_timesteps:
@@ -367,7 +369,7 @@ def run_job(bc: BenchConfig, job: dict[str, Any], queue: Any = None) -> list[dic
     for measure, deterministic, shield in finals:
         test_envs = make_eval_envs(cfg, seeds, "test", bc.eval_envs, shield=shield)
         torch.manual_seed(seeds.policy_seed("test"))  # action sampling of the stochastic policy
-        res = evaluate(
+        res = evaluate_success(
             model, test_envs, bc.final_episodes, deterministic=deterministic, normalize=norm
         )
         rows.append(_row(job, measure, steps, res, time.perf_counter() - t0))
@@ -399,12 +401,10 @@ def _key(r: dict[str, Any]) -> tuple:
     )
 
 
-def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    """Rows sorted by configuration, seed, measure and steps."""
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
-        w.writeheader()
-        w.writerows(sorted(rows, key=_key))
+def save_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``islands.csv``: the :data:`COLUMNS` of the rows sorted by configuration, seed,
+    measure and steps."""
+    write_csv(path, sorted(rows, key=_key), COLUMNS)
 
 
 def read_csv(path: Path) -> list[dict[str, Any]]:
@@ -592,7 +592,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     )
     rows: list[dict[str, Any]] = []
     t0 = time.perf_counter()
-    bar = tqdm(total=len(jobs) * bc.steps, unit="step", disable=not bc.progress)
+    # smoothing 0: rate and time left over the whole elapsed time (updates, evaluations)
+    bar = tqdm(total=len(jobs) * bc.steps, unit="step", disable=not bc.progress, smoothing=0)
     if bc.workers == 1:
 
         class _Bar:  # a queue that moves the bar directly
@@ -600,7 +601,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
 
         for job in jobs:
             rows += run_job(bc, job, _Bar())
-            write_csv(out / "islands.csv", rows)
+            save_rows(out / "islands.csv", rows)
     else:
         ctx = mp.get_context("spawn")  # no forked torch/OpenMP state in the workers
         with ctx.Manager() as manager, ProcessPoolExecutor(bc.workers, mp_context=ctx) as pool:
@@ -612,12 +613,12 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
                     bar.update(queue.get())
                 for fut in done:
                     rows += fut.result()
-                    write_csv(out / "islands.csv", rows)
+                    save_rows(out / "islands.csv", rows)
             while not queue.empty():
                 bar.update(queue.get())
     bar.close()
     wall = time.perf_counter() - t0
-    write_csv(out / "islands.csv", rows)
+    save_rows(out / "islands.csv", rows)
     finish(rows, out, f"{len(jobs)} runs of {bc.steps} steps, {bc.workers} workers, "
            f"{wall / 60:.1f} min wall")  # fmt: skip
     return rows

@@ -11,7 +11,7 @@ shield setting) to ``--out``, named
 Episode ``i`` starts from the cached grasp drawn with seed ``--seed + i`` under
 every shield setting, so the runs of one episode start alike. Policy actions are
 deterministic, on observations normalised with the run's frozen ``VecNormalize``
-statistics (:func:`train.gait.load_policy`).
+statistics (:func:`train.policy.load_policy`).
 
 Each recording (:class:`ihm.rerun_log.SceneRecorder`; timelines ``step`` and
 ``sim_time`` [s]) holds, at step ``k`` (the state after ``k`` actions; step 0 is
@@ -52,10 +52,10 @@ import rerun.blueprint as rrb
 
 from ihm.hands.four_finger import ACTUATOR_NAMES, NU
 from ihm.rerun_log import SceneRecorder
-from shields.grasp import BACKENDS
-from train.gait import SHIPPED, load_policy
-from train.ppo import build_parser, opt
-from train.rotate import RotateConfig, make_env
+from shields.qp import BACKENDS
+from train.policy import SHIPPED, load_policy
+from train.rotation import RotateConfig, make_env
+from train.sb3 import build_parser, opt
 
 __all__ = ["SHIELDS", "RolloutConfig", "blueprint", "main", "parse_config", "run_episode"]
 
@@ -230,7 +230,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     known = RotateConfig.__dataclass_fields__
     env_cfg = RotateConfig(**{k: v for k, v in env_opts.items() if k in known})
     settings = ["none", "qp"] if cfg.shield == "both" else [cfg.shield]
-    # train.rotate.make_env wraps the env in shields.GraspShield for shield "qp"
+    # train.rotation.make_env wraps the env in shields.GraspShield for shield "qp"
     envs: dict[str, gym.Env] = {
         s: make_env(replace(env_cfg, shield=s, shield_backend=cfg.backend), max_steps=cfg.steps)()
         for s in settings

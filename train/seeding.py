@@ -16,10 +16,10 @@ for a resumed one, so that a resumed run draws fresh episodes)::
 
     SeedSequence(S, spawn_key=(segment,))
     ├── 0 "train"       child i: reset seed and action-space seed of training env i
-    ├── 1 "validation"  child i: evaluation env i of ``train.ppo``'s own evaluation
+    ├── 1 "validation"  child i: evaluation env i of the trainers' own evaluations
     │                   (eval.json; what tuning looks at)
     ├── 2 "test"        child i: evaluation env i of held-out evaluations (the
-    │                   benchmark's final scores); ``train.ppo`` never draws from it
+    │                   benchmark's final scores); the trainers never draw from it
     └── 3 "global"      one 32-bit seed for Python's ``random``, numpy's legacy global
                         generator and torch (policy initialisation, action sampling)
 

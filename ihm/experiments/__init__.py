@@ -2,11 +2,11 @@
 
 The thesis checked its predictions with a load cell on a real hand; we check ours against
 simulation: each experiment settles a scene (:mod:`ihm.scenes`), predicts the resistible
-load with the stability methods on the grasp read off MuJoCo (:mod:`ihm.maps`) and
+load with the stability methods on the grasp read off MuJoCo (:mod:`ihm.sim_maps`) and
 measures it by ramping the load on the object in MuJoCo (:mod:`ihm.resistance`), with the
 fingers nonbackdrivable (:mod:`ihm.ratchet`) as the thesis models the hands. Each writes
 ``OUT/<name>.csv`` (one row per prediction or measurement), ``OUT/<name>.png`` and
-``OUT/<name>_summary.json`` (the agreement figures: :func:`ihm.maps.agreement`, ratios).
+``OUT/<name>_summary.json`` (the agreement figures: :func:`ihm.sim_maps.agreement`, ratios).
 
 Run ``python -m ihm.experiments NAME [NAME ...] --out docs/experiments`` (``--quick`` for
 a coarse direction grid). Names: see :data:`EXPERIMENTS`.

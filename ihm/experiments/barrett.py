@@ -5,7 +5,7 @@ Every experiment here uses the nonbackdrivable protocol of :func:`ihm.scenes.loa
 worm gears are ratcheted (:mod:`ihm.ratchet`), then the commanded torques are applied; a
 finger commanded 0 is a passive support, as the thesis models the hand. Directions are in
 the object frame (``frame="object"``: the thesis' axes, as each scene documents them).
-Predictions use the grasp read off the same settled state (:func:`ihm.maps.analysis_map`).
+Predictions use the grasp read off the same settled state (:func:`ihm.sim_maps.analysis_map`).
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from stability.maps import ResistibleMap, plot_resistible
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
-from ..maps import agreement, analysis_map, map_value, simulated_map, write_map_csv
 from ..resistance import simulated_resistance, touching_bodies
+from ..sim_maps import agreement, analysis_map, map_value, simulated_map, write_map_csv
 
 __all__ = ["box", "box_3d", "cube", "flask"]
 

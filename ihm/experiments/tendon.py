@@ -20,7 +20,7 @@ proximal contacts break), distal-only loads all four links.
 * simulated resistance (:func:`ihm.resistance.simulated_resistance`, ratchet on): the same
   torque about the object's x-axis in world axes, ramped until the box turns 0.05 rad;
 * the resistible-force map in the xy-plane for the distal-only preload (thesis fig.
-  underactuated), simulated and by ``refinement``, with :func:`ihm.maps.agreement`.
+  underactuated), simulated and by ``refinement``, with :func:`ihm.sim_maps.agreement`.
 
 Outputs: ``OUT/tendon_box.csv`` (one row per number: case, method, direction, value, unit,
 capped), ``OUT/tendon_box.png`` (grasp plane per case with the preload contact forces, and
@@ -43,8 +43,8 @@ from stability import Existence, MaxDisturbance, solve
 
 from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
-from ..maps import agreement, analysis_map, simulated_map
 from ..resistance import simulated_resistance
+from ..sim_maps import agreement, analysis_map, simulated_map
 
 __all__ = [
     "CASES",
@@ -61,7 +61,7 @@ __all__ = [
 SCENE = "tendon_box"
 #: tendon force of the one actively loaded tendon [N]. The distal-only preload holds the
 #: box only while the box's weight (0.98 N, out of the hand) balances the distal tips'
-#: push toward the palm: up to about 5 N (tests/test_tendon_gripper.py); 4 N keeps a margin.
+#: push toward the palm: up to about 5 N (tests/ihm/test_tendon_gripper.py); 4 N keeps a margin.
 FORCE_N = 4.0
 #: light closing commands (proximal, distal) [N] before the ratchet goes on (gravity off)
 SEAT_N = (1.0, 0.25)
@@ -320,7 +320,7 @@ def tendon_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, An
     out : output folder (created by the runner).
     quick : coarse settings for a smoke run: 8 map directions instead of 36, refinement at
         3 levels instead of 4 and shorter time limits.
-    workers : processes per map (:func:`ihm.maps.simulated_map`, ``analysis_map``).
+    workers : processes per map (:func:`ihm.sim_maps.simulated_map`, ``analysis_map``).
 
     Returns
     -------

@@ -59,6 +59,6 @@ SPREAD_RANGE = (0.0, 3.1416)  # [rad] 0-180 deg
 
 # Contact skin [MuJoCo solref (timeconst [s], damping ratio), solimp]: the hand's collision
 # class and every scene object carry the same values, so each contact simulates exactly these
-# (MuJoCo mixes a pair's parameters; tests/test_contact_params.py reads them back).
+# (MuJoCo mixes a pair's parameters; tests/ihm/test_contact_params.py reads them back).
 SKIN_SOLREF = (0.02, 1.0)
 SKIN_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)

@@ -60,6 +60,6 @@ DISTAL_LENGTH = 0.035  # distal joint to the centre of the hemispherical tip
 
 # Contact skin [MuJoCo solref (timeconst [s], damping ratio), solimp]: the hand's collision
 # class and every scene object carry the same values, so each contact simulates exactly these
-# (MuJoCo mixes a pair's parameters; tests/test_contact_params.py reads them back).
+# (MuJoCo mixes a pair's parameters; tests/ihm/test_contact_params.py reads them back).
 SKIN_SOLREF = (0.01, 1.0)
 SKIN_SOLIMP = (0.9, 0.9, 0.001, 0.5, 2.0)

@@ -1,4 +1,4 @@
-"""``python -m train.ppo`` and ``python -m train.islands``: smoke runs, resume, bad options.
+"""``python -m train.ppo islands`` and ``python -m train.islands``: smoke runs, resume, bad options.
 
 Tiny budgets (a few hundred steps) so the file stays well under a minute; the
 real benchmark is ``python -m train.islands`` (see README).
@@ -7,6 +7,7 @@ real benchmark is ``python -m train.islands`` (see README).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import pickle
@@ -17,12 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from stable_baselines3.common.vec_env import VecNormalize
 
-from train import islands, ppo
+from train import islands, islands_ppo, sb3
 from train.seeding import RunSeeds
 from train.stats import wilson_interval
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TINY = ["--n-envs", "2", "--n-steps", "64", "--batch-size", "64", "--n-epochs", "1"]
 
 
@@ -151,12 +153,12 @@ def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
 
 
 def test_build_envs_and_frozen_normalisation_and_lr_schedule() -> None:
-    cfg = ppo.Config(n_envs=2, eval_episodes=3, lr_schedule="linear", learning_rate=1e-3)
-    train_env = ppo.build_envs(cfg, RunSeeds(5))
+    cfg = islands_ppo.Config(n_envs=2, eval_episodes=3, lr_schedule="linear", learning_rate=1e-3)
+    train_env = islands_ppo.build_envs(cfg, RunSeeds(5))
     assert train_env.training and train_env.num_envs == 2
     train_env.reset()
     train_env.step(np.zeros((2, 2), dtype=np.float32))
-    norm = ppo.normalizer(train_env)
+    norm = sb3.normalizer(train_env)
     before = train_env.obs_rms.count
     x = np.array([[0.4, 0.4, 1.6, 1.55]], dtype=np.float32)
     y = norm(x)
@@ -164,26 +166,27 @@ def test_build_envs_and_frozen_normalisation_and_lr_schedule() -> None:
     np.testing.assert_allclose(
         y, np.clip((x - train_env.obs_rms.mean) / np.sqrt(train_env.obs_rms.var + 1e-8), -10, 10)
     )
-    model = ppo.build_model(cfg, train_env)
+    model = islands_ppo.build_model(cfg, train_env)
     assert model.seed is None  # SB3 would re-seed the envs with seed + i
     assert model.lr_schedule(1.0) == pytest.approx(1e-3)  # progress_remaining 1 -> 0
     assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
-    raw_train = ppo.build_envs(ppo.Config(n_envs=2, normalize=False), RunSeeds(5))
-    assert not isinstance(raw_train, ppo.VecNormalize) and ppo.normalizer(raw_train) is None
-    assert ppo.build_model(ppo.Config(), raw_train).lr_schedule(0.25) == pytest.approx(3e-4)
+    raw_train = islands_ppo.build_envs(islands_ppo.Config(n_envs=2, normalize=False), RunSeeds(5))
+    assert not isinstance(raw_train, VecNormalize) and sb3.normalizer(raw_train) is None
+    raw_model = islands_ppo.build_model(islands_ppo.Config(), raw_train)
+    assert raw_model.lr_schedule(0.25) == pytest.approx(3e-4)
     for env in (train_env, raw_train):
         env.close()
 
 
 def test_same_seed_same_initial_policy_and_rollout() -> None:
     """Two builds from one run seed give the same weights and the same first rollout."""
-    cfg = ppo.Config(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, normalize=False)
+    cfg = islands_ppo.Config(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, normalize=False)
     outs = []
     for seed in (3, 3, 4):
         seeds = RunSeeds(seed)
-        ppo.seed_everything(seeds.global_seed)
-        env = ppo.build_envs(cfg, seeds)
-        model = ppo.build_model(cfg, env)
+        sb3.seed_everything(seeds.global_seed)
+        env = islands_ppo.build_envs(cfg, seeds)
+        model = islands_ppo.build_model(cfg, env)
         w = np.concatenate([p.detach().numpy().ravel() for p in model.policy.parameters()])
         model.learn(64)  # one rollout of 2 x 32 steps
         # after training the buffer is flattened env-major: (n_envs * n_steps, obs_dim)
@@ -193,7 +196,7 @@ def test_same_seed_same_initial_policy_and_rollout() -> None:
         # SB3 trained on our streams: env i's first episode is the second draw (after the
         # seeding reset in make_env) of an env built from RunSeeds(seed).env("train", i)
         for i in range(2):
-            ref = ppo.make_env(cfg, seeds.env("train", i))()
+            ref = islands_ppo.make_env(cfg, seeds.env("train", i))()
             np.testing.assert_array_equal(obs[i, 0], ref.reset()[0])
     np.testing.assert_array_equal(outs[0][0], outs[1][0])
     np.testing.assert_array_equal(outs[0][1], outs[1][1])
@@ -201,8 +204,8 @@ def test_same_seed_same_initial_policy_and_rollout() -> None:
 
 
 def test_help_documents_every_option() -> None:
-    text = ppo.build_parser().format_help()
-    for f in ppo.dataclasses.fields(ppo.Config):
+    text = sb3.build_parser(islands_ppo.Config).format_help()
+    for f in dataclasses.fields(islands_ppo.Config):
         assert "--" + f.name.replace("_", "-") in text
         assert f.metadata["help"].split()[0] in text
 
@@ -221,7 +224,7 @@ def test_ppo_bad_options_exit_with_a_message(
     argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     with pytest.raises(SystemExit) as e:
-        ppo.parse_config(argv)
+        islands_ppo.parse_config(argv)
     assert e.value.code == 2
     assert message in capsys.readouterr().err
 

@@ -19,7 +19,8 @@ A run directory holds::
 Evaluation runs the deterministic policy for ``--eval-episodes`` episodes of
 ``--eval-seconds`` (20 s = 400 policy steps) on validation streams and reports
 the mean rotation speed (turned angle about +z over the episode's duration,
-rad/s; a drop ends an episode and counts its time so far) and the drop rate.
+rad/s; a drop ends an episode and counts its time so far) and the drop rate
+(:func:`train.evaluation.evaluate_rotation`).
 ``--resume RUN_DIR`` continues a run for ``--total-steps`` more steps.
 """
 
@@ -46,11 +47,14 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FRAME_SKIP, OBJECTS, TIMESTEP, grasp_cache
 from shields import GraspShield
-from shields.grasp import BACKENDS
+from shields.qp import BACKENDS
+from stability.io import write_csv
+from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
-from train.ppo import (
+from train.sb3 import (
     build_parser,
     new_ppo,
+    normalizer,
     open_run,
     opt,
     option_problems,
@@ -62,19 +66,28 @@ from train.seeding import EnvSeeds, RunSeeds
 from train.vec import make_vec_env
 
 __all__ = [
+    "ENV_ID",
+    "POLICY_DT",
+    "TARGET_SPEED",
     "EvalCallback",
+    "RolloutThreads",
     "RotateConfig",
     "build_model",
+    "checkpoint",
+    "env_physics",
     "evaluate_rotation",
     "export_policy",
     "main",
     "make_env",
+    "monitor_returns",
     "parse_config",
     "plot_curve",
+    "steps_label",
 ]
 
 ENV_ID = "ihm/FourFingerRotate-v0"
 POLICY_DT = TIMESTEP * FRAME_SKIP  # [s] 0.05: the thesis' 20 Hz policy
+TARGET_SPEED = 0.5  # [rad/s] the task's target (issue 11), over 20 s episodes; drops <= 5 %
 
 
 @dataclass
@@ -206,61 +219,6 @@ def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
     return new_ppo(cfg, vec_env, cfg.learning_rate, algo=PipelinedPPO)
 
 
-def evaluate_rotation(
-    model: PPO,
-    eval_envs: Sequence[gym.Env],
-    n_episodes: int,
-    normalize: Callable[[np.ndarray], np.ndarray] | None = None,
-    deterministic: bool = True,
-) -> dict[str, float]:
-    """Mean rotation speed [rad/s] and drop rate of the policy over ``n_episodes`` episodes.
-
-    Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes, all queried in one batch.
-    Speed of an episode = ``info["rotation_angle"] / (steps * dt)``; a drop ends it.
-    ``intervention_rate``: the fraction of steps in which a shield changed the action
-    (``info["shield_intervened"]``; 0 without a shield).
-    """
-    k = len(eval_envs)
-    targets = [(n_episodes + i) // k for i in range(k)] if k else []
-    counts = [0] * k
-    speeds: list[float] = []
-    drops: list[bool] = []
-    obs: list[Any] = [None] * k
-    steps = [0] * k
-    n_steps = n_shielded = 0
-    for i in range(k):
-        if targets[i] > 0:
-            obs[i], _ = eval_envs[i].reset()
-    while True:
-        active = [i for i in range(k) if counts[i] < targets[i]]
-        if not active:
-            break
-        batch = np.stack([obs[i] for i in active])
-        if normalize is not None:
-            batch = normalize(batch)
-        actions, _ = model.predict(batch, deterministic=deterministic)
-        for j, i in enumerate(active):
-            obs[i], _, term, trunc, info = eval_envs[i].step(actions[j])
-            steps[i] += 1
-            n_steps += 1
-            n_shielded += bool(info.get("shield_intervened", False))
-            if term or trunc:
-                dt = eval_envs[i].unwrapped.dt
-                speeds.append(float(info["rotation_angle"]) / (steps[i] * dt))
-                drops.append(bool(info["dropped"]))
-                counts[i] += 1
-                steps[i] = 0
-                if counts[i] < targets[i]:
-                    obs[i], _ = eval_envs[i].reset()
-    return {
-        "episodes": len(speeds),
-        "speed_rad_s": float(np.mean(speeds)) if speeds else float("nan"),
-        "speed_median_rad_s": float(np.median(speeds)) if speeds else float("nan"),
-        "drop_rate": float(np.mean(drops)) if drops else float("nan"),
-        "intervention_rate": n_shielded / n_steps if n_steps else float("nan"),
-    }
-
-
 class RolloutThreads(BaseCallback):
     """Torch on one thread while collecting rollouts, ``threads`` for the update.
 
@@ -308,8 +266,7 @@ class EvalCallback(BaseCallback):
                 self.evaluate()
 
     def evaluate(self) -> dict[str, float]:
-        env = self.model.get_env()
-        norm = env.normalize_obs if isinstance(env, VecNormalize) else None
+        norm = normalizer(self.model.get_env())
         res = evaluate_rotation(self.model, self.eval_envs, self.cfg.eval_episodes, norm)
         row = {
             "steps": int(self.num_timesteps),
@@ -319,12 +276,11 @@ class EvalCallback(BaseCallback):
             "wall_s": round(time.perf_counter() - self.t0, 1),
         }
         path = self.run_dir / "eval.csv"
-        new = not path.is_file()
-        with path.open("a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(row))
-            if new:
-                w.writeheader()
-            w.writerow(row)
+        rows = []
+        if path.is_file():  # a resumed run goes on with its rows
+            with path.open(newline="") as f:
+                rows = list(csv.DictReader(f))
+        write_csv(path, [*rows, row], columns=list(row))
         self.logger.record("eval/speed_rad_s", res["speed_rad_s"])
         self.logger.record("eval/drop_rate", res["drop_rate"])
         plot_curve(self.run_dir)
@@ -356,7 +312,7 @@ def export_policy(run_dir: Path, dest: Path) -> Path:
     return dest
 
 
-def _monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+def monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """(cumulative env steps at each episode end, episode return) over all monitor files, in
     wall-time order."""
     rows = []
@@ -372,15 +328,26 @@ def _monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.cumsum(length), r
 
 
+def steps_label(x: float) -> str:
+    """A step count for an axis: ``0``, ``500``, ``100k``, ``1.6M``."""
+    if abs(x) >= 1e6:
+        return f"{x / 1e6:g}M"
+    if abs(x) >= 1e3:
+        return f"{x / 1e3:g}k"
+    return f"{x:g}"
+
+
 def plot_curve(run_dir: Path, out: Path | None = None) -> Path:
     """curve.png: training episode return (64-step episodes, smoothed) and the evaluated
-    rotation speed and drop rate over env steps."""
+    rotation speed and drop rate over env steps; the dotted line is the speed target of
+    :data:`TARGET_SPEED` (issue 11: >= 0.5 rad/s over 20 s episodes, <= 5 % drops)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
 
-    steps, ret = _monitor_returns(run_dir)
+    steps, ret = monitor_returns(run_dir)
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     if len(ret):
         w = max(1, min(200, len(ret) // 20))
@@ -399,12 +366,16 @@ def plot_curve(run_dir: Path, out: Path | None = None) -> Path:
             x = [int(r["steps"]) for r in rows]
             ax[1].plot(x, [float(r["speed_rad_s"]) for r in rows], "o-", label="speed [rad/s]")
             ax[1].plot(x, [float(r["drop_rate"]) for r in rows], "s--", label="drop rate")
-            ax[1].axhline(0.5, color="gray", lw=0.8, ls=":")
+            ax[1].axhline(
+                TARGET_SPEED, color="gray", lw=0.8, ls=":", label="target speed (>= 0.5 rad/s)"
+            )
             ax[1].legend(loc="upper left")
     ax[1].set_xlabel("env steps")
     ax[1].set_title("evaluation: deterministic policy, 20 s episodes")
     for a in ax:
         a.grid(alpha=0.3)
+        a.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))
+        a.xaxis.set_major_formatter(FuncFormatter(lambda x, _: steps_label(x)))
     fig.tight_layout()
     out = out or run_dir / "curve.png"
     fig.savefig(out, dpi=110)

@@ -16,7 +16,7 @@ from ihm.resistance import simulated_resistance
 from stability import GraspError
 from stability.examples import PINCH_LEVER, PINCH_MAX_Z, PINCH_MU, PINCH_TORQUE
 
-PINCH = Path(__file__).resolve().parents[1] / "assets" / "analytic" / "pinch.xml"
+PINCH = Path(__file__).resolve().parents[2] / "assets" / "analytic" / "pinch.xml"
 
 
 def _pinch(torque: float = PINCH_TORQUE, settle_steps: int = 500, away: bool = False):
@@ -137,9 +137,9 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from ihm.maps import simulated_map
+    from ihm.sim_maps import simulated_map
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root), "MPLBACKEND": "Agg"}
     args = ["barrett_box", "--directions", "4", "--cap", "3", "--no-progress"]
     p = subprocess.run(
@@ -177,7 +177,7 @@ def test_analysis_map_on_a_scene_grasp() -> None:
     """A stability method's map on the settled scene's grasp, the weight as base load: gws
     on barrett_box gives finite positive forces, symmetric in +-x and +-y like the box grasp;
     an unknown method is refused."""
-    from ihm.maps import MapError, analysis_map
+    from ihm.sim_maps import MapError, analysis_map
 
     rm = analysis_map("barrett_box", "xy", 4, method="gws", cap=20, progress=False)
     assert rm.method == "gws" and np.all(np.isfinite(rm.magnitudes))
@@ -191,7 +191,7 @@ def test_analysis_map_on_a_scene_grasp() -> None:
 def test_map_agreement_measures() -> None:
     """agreement(): finite-vs-capped agreement over answered directions and the median
     |ln(pred/sim)| over directions finite in both, on hand-made maps."""
-    from ihm.maps import MapError, agreement
+    from ihm.sim_maps import MapError, agreement
     from stability.maps import ResistibleMap
 
     a = np.linspace(0, 2 * np.pi, 6, endpoint=False)
@@ -256,7 +256,7 @@ def test_new_contact_ends_the_run():
 def test_object_frame_maps_turn_with_the_object():
     """frame='object' maps the object's axes: on barrett_box (object x = palm y) the
     object-frame map at 0 deg is the world-frame yz map at 0 deg (force along palm +y)."""
-    from ihm.maps import analysis_map
+    from ihm.sim_maps import analysis_map
 
     kw = dict(method="gws", preload=[0, 0.1, 0.1, 0], cap=20, progress=False)
     obj = analysis_map("barrett_box", "xy", 4, frame="object", **kw)
@@ -270,7 +270,7 @@ def test_experiments_cli_rejects_unknown_names() -> None:
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     q = subprocess.run([sys.executable, "-m", "ihm.experiments", "nope"], cwd=root,
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert q.returncode == 2 and "unknown experiment 'nope'" in q.stderr

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from train import islands, ppo
+from train import islands, islands_ppo
+from train.evaluation import evaluate_success
 from train.seeding import STREAMS, RunSeeds
 from train.stats import wilson_interval
 
@@ -72,10 +73,10 @@ def _first_tasks(env, n: int) -> list[tuple[float, ...]]:
 def test_training_envs_of_two_runs_draw_different_episodes():
     """The envs that build_envs makes for run seeds 1 and 2 draw no common episode, and the
     same run seed redraws the same ones."""
-    cfg = ppo.Config(n_envs=8, normalize=False)
+    cfg = islands_ppo.Config(n_envs=8, normalize=False)
     draws = {}
     for seed in (1, 2, 1):
-        vec = ppo.build_envs(cfg, RunSeeds(seed))
+        vec = islands_ppo.build_envs(cfg, RunSeeds(seed))
         draws.setdefault(seed, []).append(
             [tuple(t) for env in vec.envs for t in _first_tasks(env, 3)]
         )
@@ -86,22 +87,22 @@ def test_training_envs_of_two_runs_draw_different_episodes():
 
 
 def test_eval_envs_are_paired_across_shields_and_disjoint_from_training():
-    cfg = ppo.Config(shield="smart", normalize=False)
+    cfg = islands_ppo.Config(shield="smart", normalize=False)
     seeds = RunSeeds(4)
-    shielded = ppo.make_eval_envs(cfg, seeds, "test", 3)
-    plain = ppo.make_eval_envs(cfg, seeds, "test", 3, shield="none")
-    val = ppo.make_eval_envs(cfg, seeds, "validation", 3)
+    shielded = islands_ppo.make_eval_envs(cfg, seeds, "test", 3)
+    plain = islands_ppo.make_eval_envs(cfg, seeds, "test", 3, shield="none")
+    val = islands_ppo.make_eval_envs(cfg, seeds, "validation", 3)
     assert type(shielded[0]).__name__ == "SmartShield" and type(plain[0]).__name__ != "SmartShield"
     a = [_first_tasks(e, 4) for e in shielded]
     assert a == [_first_tasks(e, 4) for e in plain]  # the same episodes with and without shield
     assert not {t for x in a for t in x} & {t for e in val for t in _first_tasks(e, 4)}
     with pytest.raises(ValueError, match="'validation' or 'test'"):
-        ppo.make_eval_envs(cfg, seeds, "train", 2)
+        islands_ppo.make_eval_envs(cfg, seeds, "train", 2)
 
 
 def test_ppo_parse_rejects_negative_seed(capsys):
     with pytest.raises(SystemExit):
-        ppo.parse_config(["--seed", "-2"])
+        islands_ppo.parse_config(["--seed", "-2"])
     assert "--seed must be >= 0" in capsys.readouterr().err
 
 
@@ -165,11 +166,11 @@ class GreedyPolicy:
 def test_cycle_stop_gives_the_same_result_as_running_to_the_limit(shield, policy, env_id):
     """Stopping an episode whose state repeats (and completing it analytically) changes no
     statistic against stepping it out to the 200-step limit."""
-    cfg = ppo.Config(env_id=env_id, shield=shield, normalize=False)
+    cfg = islands_ppo.Config(env_id=env_id, shield=shield, normalize=False)
     res = {}
     for stop in (True, False):
-        envs = ppo.make_eval_envs(cfg, RunSeeds(11), "test", 4)
-        res[stop] = ppo.evaluate(policy, envs, 30, stop_cycles=stop)
+        envs = islands_ppo.make_eval_envs(cfg, RunSeeds(11), "test", 4)
+        res[stop] = evaluate_success(policy, envs, 30, stop_cycles=stop)
     assert res[True]["cycles_stopped"] > 0 and res[False]["cycles_stopped"] == 0
     for key in ("episodes", "successes", "failures", "mean_length", "intervention_rate"):
         assert res[True][key] == res[False][key], key
@@ -178,13 +179,13 @@ def test_cycle_stop_gives_the_same_result_as_running_to_the_limit(shield, policy
 
 
 def test_evaluate_counts_episodes_per_env_and_ignores_cycles_when_stochastic():
-    cfg = ppo.Config(env_id="ihm/IslandsBridgesRing-v0", shield="none", normalize=False)
-    envs = ppo.make_eval_envs(cfg, RunSeeds(2), "validation", 3)
-    res = ppo.evaluate(GreedyPolicy(1), envs, 10, deterministic=False)
+    cfg = islands_ppo.Config(env_id="ihm/IslandsBridgesRing-v0", shield="none", normalize=False)
+    envs = islands_ppo.make_eval_envs(cfg, RunSeeds(2), "validation", 3)
+    res = evaluate_success(GreedyPolicy(1), envs, 10, deterministic=False)
     assert res["episodes"] == 10 and res["cycles_stopped"] == 0
     assert res["successes"] + res["failures"] <= 10
     assert res["intervention_rate"] == 0.0  # no shield
-    empty = ppo.evaluate(GreedyPolicy(), envs, 0)
+    empty = evaluate_success(GreedyPolicy(), envs, 0)
     assert empty["episodes"] == 0 and np.isnan(empty["success_rate"])
 
 
@@ -193,9 +194,9 @@ def test_greedy_policy_shows_the_shields_difference():
     without a shield, freezes with the simple shield and gets further with the smart one."""
     out = {}
     for shield in ("none", "simple", "smart"):
-        cfg = ppo.Config(env_id="ihm/IslandsBridgesRing-v0", shield=shield, normalize=False)
-        envs = ppo.make_eval_envs(cfg, RunSeeds(3), "test", 4)
-        out[shield] = ppo.evaluate(GreedyPolicy(), envs, 40)
+        cfg = islands_ppo.Config(env_id="ihm/IslandsBridgesRing-v0", shield=shield, normalize=False)
+        envs = islands_ppo.make_eval_envs(cfg, RunSeeds(3), "test", 4)
+        out[shield] = evaluate_success(GreedyPolicy(), envs, 40)
     assert out["none"]["failure_rate"] > 0.5
     assert out["simple"]["failures"] == out["smart"]["failures"] == 0
     assert out["simple"]["cycles_stopped"] > 0

@@ -33,7 +33,8 @@ Contact subsets (thesis' enumeration): the contacts of one hand link are shielde
 together (a link is the unit the observation reports). Every set of at least two touching
 links whose contacts are in force closure is a candidate, tested on the primitive wrenches
 of the friction polygon the constraints enforce (its k vertices; the Ferrari-Canny
-construction of :mod:`stability.gws`), i.e. as point contacts, which need three contacts.
+construction of :mod:`stability.gws`; the test: :mod:`shields.force_closure`), i.e. as point
+contacts, which need three contacts.
 ``ShieldLimits(soft_closure=True)`` adds the torsional rays ``c_tau = +-mu_tau c_n`` of
 condim-4 contacts (soft fingers), so that two fingertips can be a candidate; measured,
 that shield releases more and drops the object more often (README), so it is not the
@@ -80,6 +81,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from shields.compliance import GraspLinearization, ShieldError, linearize
+from shields.force_closure import force_closure_wrenches
 
 __all__ = [
     "BACKENDS",
@@ -88,7 +90,6 @@ __all__ = [
     "ShieldLimits",
     "ShieldProblem",
     "ShieldResult",
-    "force_closure_wrenches",
     "tilt_angles",
 ]
 
@@ -233,6 +234,11 @@ class ShieldProblem:
         self._closure[mask] = ok
         return ok
 
+    def known_closure(self, mask: int) -> bool:
+        """Whether :meth:`closure` has found the link set ``mask`` in force closure (its memo
+        only: tests nothing new)."""
+        return self._closure.get(mask, False)
+
     def link_sets(self) -> list[int]:
         """Bit masks of the link sets that could be in force closure (:meth:`_possible`), the
         largest first."""
@@ -318,36 +324,6 @@ def _pyramid(edges: int) -> tuple[NDArray[np.float64], float, NDArray[np.float64
         float(np.cos(np.pi / edges)),
         np.stack([np.cos(v), np.sin(v)], axis=1),
     )
-
-
-def force_closure_wrenches(W: NDArray[np.float64]) -> bool:
-    """Whether the wrenches ``W`` (K, 6) positively span R^6: the origin is strictly inside
-    their convex hull (force closure of the contacts whose primitive wrenches they are,
-    :func:`stability.gws.primitive_wrenches`).
-
-    Test: ``rank W = 6`` and some ``lambda >= 1`` has ``W^T lambda = 0`` (a strictly
-    positive combination that cancels), decided by one small QP (DAQP). Scale torques to
-    forces before calling (the test is invariant to that scaling, its tolerances are not).
-    """
-    W = np.asarray(W, dtype=np.float64)
-    if W.ndim != 2 or W.shape[1] != 6 or len(W) < 7:
-        return False
-    ev = np.linalg.eigvalsh(W.T @ W)  # rank 6 <=> W^T W positive definite
-    if not ev[0] > 1e-12 * max(float(ev[-1]), 1e-300):
-        return False
-    k = len(W)
-    # lambda = 1 + mu: min 0.5 |mu|^2  s.t.  mu >= 0 (bounds), W^T mu = -W^T 1 (equalities).
-    # (The minimiser starts from mu = 0, which satisfies the bounds: a few active-set steps,
-    # where 0.5 |lambda|^2 with lambda >= 1 starts with every bound violated.)
-    lo, hi, sense = _closure_bounds(k)
-    b = -W.sum(axis=0)
-    lo[k:] = b
-    hi[k:] = b
-    mu, _, flag, _ = daqp.solve(_eye(k), np.zeros(k), np.ascontiguousarray(W.T), hi, lo, sense)
-    if flag < 1:
-        return False
-    lam = 1.0 + np.maximum(mu, 0.0)
-    return bool(np.abs(W.T @ lam).max() <= 1e-7 * max(float(lam.sum()), 1.0))
 
 
 class GraspQP:
@@ -552,7 +528,7 @@ class GraspQP:
             )
             if better and prob.closure(mask):
                 best_x, best_mask, best_obj, best_viol = x, mask, obj, viol
-        cands = sum(1 for mask in sets if prob._closure.get(mask, False))
+        cands = sum(1 for mask in sets if prob.known_closure(mask))
         if best_x is None:
             return done(np.zeros(self.l), "fallback", 0, cands, qps, 0.0)
         return done(best_x, "corrected", best_mask, cands, qps, best_viol)
@@ -630,18 +606,6 @@ def _eye(n: int) -> NDArray[np.float64]:
 @lru_cache(maxsize=256)
 def _sense(n: int) -> NDArray[np.int32]:
     return np.zeros(n, dtype=np.int32)
-
-
-def _closure_bounds(k: int) -> tuple[NDArray, NDArray, NDArray]:
-    """Bounds ``mu >= 0`` then 6 equality rows (their values set by the caller)."""
-    lo = np.zeros(k + 6)
-    hi = np.concatenate([np.full(k, _INF), np.zeros(6)])
-    return lo, hi, _closure_sense(k)
-
-
-@lru_cache(maxsize=64)
-def _closure_sense(k: int) -> NDArray[np.int32]:
-    return np.concatenate([np.zeros(k, np.int32), np.full(6, 5, np.int32)])
 
 
 def _masks(n: int, size: int) -> Iterator[int]:

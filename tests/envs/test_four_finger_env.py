@@ -1,15 +1,12 @@
 """``ihm/FourFingerRotate-v0`` (envs.four_finger): API checks, the observation against
 ihm.grasp_from_mujoco / mj_contactForce, the reward's sign and terms, stable resets, bad
-input, and a subprocess smoke run of the main job ``python -m train.ppo``."""
+input, the grasp cache, the explicit contact pairs and the solver settings.
+
+The training smoke runs on this env: tests/train/test_rotation_train_smoke.py."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import warnings
-from pathlib import Path
 
 import gymnasium as gym
 import mujoco
@@ -35,8 +32,6 @@ from envs.four_finger import (
 )
 from ihm.contacts import grasp_from_mujoco
 from ihm.hands import four_finger as ff
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -200,7 +195,7 @@ def test_no_contact_gives_zeros(env) -> None:
     m, d = env.model, env.data
     d.qpos[ff.NQ : ff.NQ + 3] = [0.0, 0.0, 0.5]  # object lifted clear of the hand
     mujoco.mj_forward(m, d)
-    obs = env._observe()
+    obs = env.observe()
     assert d.ncon == 0 or all(
         m.body("object").id not in (m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2])
         for c in d.contact[: d.ncon]
@@ -272,10 +267,10 @@ def test_solver_tolerance_changes_nothing_the_policy_sees() -> None:
     changes (median and largest); 8 cached grasps held 10 s with zero actions end within
     0.01 rad (1e-3 rad/s of creep, 0.2 % of the rotation target) and 0.2 mm of the 1e-8
     hold. (1e-2 fails both, 1e-3 the first.)"""
-    from envs.bench import policy_step_outcomes, save_state
+    from envs.four_finger import policy_step_outcomes, save_state
 
     e = FourFingerRotate()
-    m, d, ph = e.model, e.data, e._ph
+    m, d, ph = e.model, e.data, e.physics
     rng = np.random.default_rng(3)
     states = []
     for ep in range(4):
@@ -321,10 +316,10 @@ def test_explicit_pairs_simulate_the_scene_unchanged(obj) -> None:
     for bit as the scene's own broadphase (600 policy steps). From the same state
     each policy step, with random setpoints large enough to reach finger-finger, palm and
     catch-plane contacts."""
-    from envs.four_finger import _Physics
+    from envs.four_finger import Physics
 
-    new = _Physics(obj, True, TIMESTEP)
-    old = _Physics(obj, True, TIMESTEP, explicit_pairs=False)
+    new = Physics(obj, True, TIMESTEP)
+    old = Physics(obj, True, TIMESTEP, explicit_pairs=False)
     assert new.model.npair == 34 and old.model.npair == 0  # 10 with the object, 24 cross-finger
     assert new.model.opt.integrator == old.model.opt.integrator
     assert not new.model.geom_contype.any() and not new.model.geom_conaffinity.any()
@@ -361,11 +356,11 @@ def test_explicit_pairs_simulate_the_scene_unchanged(obj) -> None:
 
 @pytest.mark.parametrize("filterparent", [True, False])
 def test_dynamic_pairs_are_the_pairs_mujoco_collides(filterparent) -> None:
-    """envs.four_finger._dynamic_pairs against MuJoCo's own broadphase on a model where every
+    """envs.four_finger.dynamic_pairs against MuJoCo's own broadphase on a model where every
     geom overlaps every other: a jointed chain (parent-child), a body welded to its parent,
     a free body, an <exclude>, contype/conaffinity that rule pairs out, with and without
     the filterparent rule. Scenes with mocap bodies are refused."""
-    from envs.four_finger import _dynamic_pairs
+    from envs.four_finger import dynamic_pairs
 
     flag = "" if filterparent else '<option><flag filterparent="disable"/></option>'
     xml = f"""<mujoco>{flag}<worldbody>
@@ -383,17 +378,17 @@ def test_dynamic_pairs_are_the_pairs_mujoco_collides(filterparent) -> None:
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     got = {tuple(sorted(p)) for p in d.contact.geom.tolist()}
-    assert got == set(_dynamic_pairs(m))
+    assert got == set(dynamic_pairs(m))
     assert len(got) >= 5
     mocap = xml.replace('<body name="e"><freejoint/>', '<body name="e" mocap="true">')
     with pytest.raises(FourFingerError, match="mocap"):
-        _dynamic_pairs(mujoco.MjModel.from_xml_string(mocap))
+        dynamic_pairs(mujoco.MjModel.from_xml_string(mocap))
 
 
 def test_mixed_contact_parameters_are_mujocos() -> None:
-    """envs.four_finger._mixed_contact against what MuJoCo puts on a dynamic contact, for
+    """envs.four_finger.mixed_contact against what MuJoCo puts on a dynamic contact, for
     geoms of equal and of different priority, solmix weights and both solref formats."""
-    from envs.four_finger import _mixed_contact
+    from envs.four_finger import mixed_contact
 
     cases = [
         ('priority="1" friction="0.7 0.01 0.001" condim="3"', 'friction="1.2 0.02 0" condim="6"'),
@@ -411,7 +406,7 @@ def test_mixed_contact_parameters_are_mujocos() -> None:
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         assert d.ncon == 1
-        c, want = d.contact[0], _mixed_contact(m, 0, 1)
+        c, want = d.contact[0], mixed_contact(m, 0, 1)
         assert c.dim == want["condim"]
         np.testing.assert_allclose(c.friction, want["friction"], rtol=1e-12)
         np.testing.assert_allclose(c.solref, want["solref"], rtol=1e-12)
@@ -419,7 +414,7 @@ def test_mixed_contact_parameters_are_mujocos() -> None:
     # margins and gaps: mixed differently by MuJoCo versions, refused
     m = mujoco.MjModel.from_xml_string(xml.replace('size="0.05"', 'size="0.05" margin="0.01"'))
     with pytest.raises(FourFingerError, match="margin or gap"):
-        _mixed_contact(m, 0, 1)
+        mixed_contact(m, 0, 1)
 
 
 def test_drop_terminates_with_the_penalty() -> None:
@@ -464,9 +459,9 @@ def test_grasp_cache_is_varied_and_reloads(tmp_path, monkeypatch) -> None:
     assert np.ptp(c.ctrl[:, 1::3] - c.qpos[:, 1:12:3]) > 0.02  # flexion squeeze varies
     grasps = grasp_cache("cylinder", False, 6)
     assert (tmp_path / "grasps").is_dir() and len(list((tmp_path / "grasps").glob("*.npz"))) == 1
-    from envs import four_finger
+    from envs.four_finger import cache
 
-    four_finger._MEMORY.clear()
+    cache._MEMORY.clear()  # white-box: force the disk read
     again = grasp_cache("cylinder", False, 6)
     np.testing.assert_array_equal(grasps.qpos, again.qpos)
     e = FourFingerRotate(object="cylinder", gravity=False, n_grasps=6)
@@ -526,85 +521,3 @@ def test_rgb_array_render() -> None:
     assert img.shape == (64, 96, 3) and img.dtype == np.uint8
     assert img.std() > 5  # not blank
     e.close()
-
-
-def _train_ppo(*args: str) -> subprocess.CompletedProcess:
-    """``python -m train.ppo *args`` in a subprocess from the checkout (5 min limit)."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
-    return subprocess.run(
-        [sys.executable, "-m", "train.ppo", *args],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
-
-
-def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
-    """``python -m train.ppo`` (no task: the rotation main job) with a tiny budget writes the
-    model, normalisation, evaluation, curve; --resume adds steps."""
-    tiny = [
-        "--total-steps", "256", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64",
-        "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32", "--eval-episodes", "2",
-        "--eval-seconds", "1", "--checkpoint-every", "128", "--no-progress",
-    ]  # fmt: skip
-    p = _train_ppo(*tiny, "--out", str(tmp_path))
-    assert p.returncode == 0, p.stderr[-2000:]
-    (run_dir,) = list(tmp_path.iterdir())
-    for f in ("model.zip", "vecnormalize.pkl", "eval.json", "eval.csv", "curve.png"):
-        assert (run_dir / f).is_file(), f
-    res = json.loads((run_dir / "eval.json").read_text())
-    assert res["num_timesteps"] == 256 and res["episodes"] == 2
-    assert 0.0 <= res["drop_rate"] <= 1.0 and np.isfinite(res["speed_rad_s"])
-    assert "rad/s" in p.stdout
-    q = _train_ppo("--resume", str(run_dir), "--total-steps", "128", "--no-progress")
-    assert q.returncode == 0, q.stderr[-2000:]
-    assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
-
-
-def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
-    """``python -m train.ppo --shield qp``: the envs (training and evaluation) run inside
-    ``shields.GraspShield``; the run records it."""
-    tiny = [
-        "--shield", "qp", "--total-steps", "128", "--n-envs", "2", "--n-steps", "64",
-        "--batch-size", "64", "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32",
-        "--eval-episodes", "2", "--eval-seconds", "1", "--workers", "0", "--no-progress",
-    ]  # fmt: skip
-    p = _train_ppo(*tiny, "--out", str(tmp_path))
-    assert p.returncode == 0, p.stderr[-2000:]
-    (run_dir,) = list(tmp_path.iterdir())
-    assert "__qp__" in run_dir.name
-    cfg = json.loads((run_dir / "config.json").read_text())
-    assert cfg["shield"] == "qp" and cfg["shield_backend"] == "daqp"
-    res = json.loads((run_dir / "eval.json").read_text())
-    assert res["num_timesteps"] == 128 and 0.0 <= res["intervention_rate"] <= 1.0
-
-
-def test_train_timestep_option_keeps_the_policy_period() -> None:
-    """``python -m train.ppo --timestep``: the env runs 0.05 s / timestep substeps (a 20 Hz
-    policy either way), and a timestep that does not divide 0.05 s is refused."""
-    from train.rotate import env_physics, make_env, parse_config
-
-    cfg = parse_config(["--timestep", "0.0025"])
-    env = make_env(cfg)()
-    assert env.unwrapped.model.opt.timestep == 0.0025 and env.unwrapped.frame_skip == 20
-    assert env.unwrapped.dt == pytest.approx(0.05)
-    assert env_physics(TIMESTEP) == {"timestep": TIMESTEP, "frame_skip": FRAME_SKIP}
-    with pytest.raises(SystemExit):
-        parse_config(["--timestep", "0.003"])
-    with pytest.raises(ValueError, match="divide"):
-        env_physics(0.0)
-    # a run's physics travels with its policy (config.json); runs before the option: 2 ms
-    from train.gait import SHIPPED, load_policy
-
-    for name, physics in (
-        ("four_finger_sphere", (0.002, 25)),
-        ("four_finger_sphere_2.5ms", (0.0025, 20)),
-    ):
-        kw = load_policy(SHIPPED.parent / name)[1]
-        assert (kw["timestep"], kw["frame_skip"]) == physics
-
-
-def test_gait_period_of_a_periodic_signal() -> None:
-    from train.gait import gait_period
-
-    t = np.arange(400)
-    ctrl = np.stack([np.sin(2 * np.pi * t / 23 + k) for k in range(12)], axis=1)
-    assert gait_period(ctrl) == 23

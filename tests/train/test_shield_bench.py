@@ -1,4 +1,4 @@
-"""shields.bench: the QP shield's measurements (accuracy, latency, effect) on tiny sizes.
+"""train.bench shield: the QP shield's measurements (accuracy, latency, effect) on tiny sizes.
 
 Each subcommand writes its CSV, summary CSV and PNG, and its numbers satisfy checks that a
 wrong measurement would fail: the linearisation's error on settled grasps, positive times in
@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from envs.four_finger import FourFingerRotate
-from shields import bench
-from shields.grasp import BACKENDS, STATUSES
+from shields.qp import BACKENDS, STATUSES
+from train.bench import shield_accuracy, shield_common, shield_effect, shield_latency
+from train.bench.__main__ import main as bench_main
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -35,7 +36,7 @@ def check_files(out: Path, name: str, n_rows: int) -> list[dict[str, str]]:
 
 
 def test_accuracy_on_settled_grasps(tmp_path: Path) -> None:
-    rows = bench.run_accuracy(
+    rows = shield_accuracy.run_accuracy(
         tmp_path, seed=0, states=2, deltas=(0.01,), sources=("settled",), actions=1,
         progress=False,
     )  # fmt: skip
@@ -48,15 +49,15 @@ def test_accuracy_on_settled_grasps(tmp_path: Path) -> None:
     # a settled grasp keeps its contacts after 0.01 rad, and MuJoCo answers mostly linearly
     assert all(r["same_contacts"] for r in servo)
     assert np.mean([r["linear"] for r in servo]) > 0.3
-    # the linearisation predicts MuJoCo's change (tests/test_compliance.py: 0.14 / 0.19)
+    # the linearisation predicts MuJoCo's change (tests/shields/test_compliance.py: 0.14 / 0.19)
     assert np.median([r["err_force"] for r in servo]) < 0.5
     assert np.median([r["err_pos"] for r in servo]) < 0.5
     assert np.median([r["err_rot"] for r in servo]) < 0.5
     assert all(r["dc_norm"] > 0 and r["dp_norm_m"] > 0 for r in servo)
-    summary = bench.summarize_accuracy(rows)
+    summary = shield_accuracy.summarize_accuracy(rows)
     assert {s["perturbation"] for s in summary} == {"servo 0.01 rad", "action 0.05 a"}
     # deterministic for a seed
-    again = bench.run_accuracy(
+    again = shield_accuracy.run_accuracy(
         tmp_path / "again", seed=0, states=2, deltas=(0.01,), sources=("settled",), actions=1,
         progress=False,
     )  # fmt: skip
@@ -72,11 +73,11 @@ def test_rotation_is_in_world_axes() -> None:
     mujoco.mju_axisAngle2Quat(dq, np.array([1.0, 0.0, 0.0]), 0.01)
     q1 = np.zeros(4)
     mujoco.mju_mulQuat(q1, dq, q0)  # a world-x rotation after q0
-    np.testing.assert_allclose(bench._rot(q1, q0), [0.01, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(shield_accuracy._rot(q1, q0), [0.01, 0.0, 0.0], atol=1e-12)
 
 
 def test_latency_alternates_backends_at_the_same_state(tmp_path: Path) -> None:
-    rows = bench.run_latency(
+    rows = shield_latency.run_latency(
         tmp_path, seed=0, episodes=1, steps=6, repeats=2, sources=("random",), progress=False
     )
     check_files(tmp_path, "latency", len(rows))
@@ -89,7 +90,7 @@ def test_latency_alternates_backends_at_the_same_state(tmp_path: Path) -> None:
         # the same state for both backends: the same touching links and contacts
         assert len({(r["links"], r["contacts"]) for r in calls}) == 1
     assert all(r["solve_time_s"] > 0 and r["status"] in STATUSES for r in rows)
-    summary = bench.summarize_latency(rows)
+    summary = shield_latency.summarize_latency(rows)
     ratio = next(s for s in summary if s["by"] == "ratio" and s["group"] == "all states")
     assert ratio["calls"] == len(states) and ratio["median_ms"] > 0
     for b in BACKENDS:
@@ -98,7 +99,7 @@ def test_latency_alternates_backends_at_the_same_state(tmp_path: Path) -> None:
 
 
 def test_effect_pairs_episodes_and_counts_interventions(tmp_path: Path) -> None:
-    rows = bench.run_effect(tmp_path, seed=3, episodes=2, steps=25, agents=("random",),
+    rows = shield_effect.run_effect(tmp_path, seed=3, episodes=2, steps=25, agents=("random",),
                             progress=False)  # fmt: skip
     check_files(tmp_path, "effect", 4)
     for ep in range(2):
@@ -108,7 +109,7 @@ def test_effect_pairs_episodes_and_counts_interventions(tmp_path: Path) -> None:
         assert none["interventions"] == 0 and sum(none[s] for s in STATUSES) == 0
         assert sum(qp[s] for s in STATUSES) == qp["steps"]
         assert qp["interventions"] == qp["corrected"] + qp["fallback"]
-    summary = {s["shield"]: s for s in bench.summarize_effect(rows)}
+    summary = {s["shield"]: s for s in shield_effect.summarize_effect(rows)}
     assert summary["qp"]["intervention_rate"] > 0 and summary["qp"]["mean_correction"] > 0
     assert summary["none"]["intervention_rate"] == 0
     assert 0 <= summary["none"]["drop_lo"] <= summary["none"]["drop_rate"] <= 1
@@ -120,27 +121,31 @@ def test_slip_detector_is_silent_on_a_still_hand() -> None:
     env = FourFingerRotate()
     zero = np.zeros(12, dtype=np.float32)
     for seed in range(3):
-        row = bench.run_episode(env, lambda obs: zero, seed=seed, action_seed=(0,), steps=10)
+        row = shield_effect.run_episode(
+            env, lambda obs: zero, seed=seed, action_seed=(0,), steps=10
+        )
         assert row["slip_events"] == row["contact_losses"] == 0 and not row["dropped"]
     # MuJoCo's forces lie in the elliptic cone (ratio <= 1), some of them on it (ratio = 1)
     rng = np.random.default_rng(0)
     env.reset(seed=0)
-    links = bench._Links(env.model)
+    links = shield_common.Links(env.model)
     ratios = []
     for _ in range(5):
         env.step(rng.uniform(-1, 1, 12).astype(np.float32))
-        ratios += bench.cone_ratios(env.data, [i for _, i in links.contacts(env.data)]).tolist()
-    assert ratios and max(ratios) <= 1 + 1e-9 and max(ratios) >= bench.SLIP_RATIO
+        ratios += shield_common.cone_ratios(
+            env.data, [i for _, i in links.contacts(env.data)]
+        ).tolist()
+    assert ratios and max(ratios) <= 1 + 1e-9 and max(ratios) >= shield_common.SLIP_RATIO
 
 
 def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["--out", str(tmp_path), "--no-progress", "--seed", "1"]
-    bench.main(["effect", *args, "--episodes", "1", "--steps", "3", "--agents", "random"])
+    bench_main(["shield", "effect", *args, "--episodes", "1", "--steps", "3", "--agents", "random"])
     text = capsys.readouterr().out
     assert "paired speed difference" in text and "shield_effect.png" in text
     with pytest.raises(SystemExit) as exc:
-        bench.main(["effect", *args, "--agents", "robot"])
+        bench_main(["shield", "effect", *args, "--agents", "robot"])
     assert exc.value.code == 2
     with pytest.raises(SystemExit) as exc:
-        bench.main(["latency", *args, "--steps", "0"])
+        bench_main(["shield", "latency", *args, "--steps", "0"])
     assert exc.value.code == 2

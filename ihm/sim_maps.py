@@ -43,6 +43,7 @@ __all__ = [
     "MapError",
     "agreement",
     "analysis_map",
+    "check_options",
     "map_value",
     "plot_maps",
     "simulated_map",
@@ -59,8 +60,10 @@ class MapError(GraspError):
 FRAMES = ("world", "object")
 
 
-def _check(plane: str, method: str, directions: int, workers: int, cap: float,
-           frame: str = "world") -> None:  # fmt: skip
+def check_options(plane: str, method: str, directions: int, workers: int, cap: float,
+                  frame: str = "world") -> None:  # fmt: skip
+    """:class:`MapError` unless the plane, method, direction count, workers, force cap and
+    frame of a map are valid."""
     try:
         plane_axes(plane)
     except GraspError as exc:
@@ -158,7 +161,7 @@ def simulated_map(
     force stands for the object's weight turned around); ``resistance_kwargs`` go to
     :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
     """
-    _check(plane, "sim", directions, workers, cap, frame)
+    check_options(plane, "sim", directions, workers, cap, frame)
     scenes.scene_path(scene)  # unknown scene: SceneError before any worker starts
     angles, units = _directions(plane, directions)
     pre = None if preload is None else np.asarray(preload, dtype=float)
@@ -230,7 +233,7 @@ def analysis_map(
     ``frame`` and ``gravity`` as there (no gravity: no base load)."""
     from .contacts import grasp_from_mujoco
 
-    _check(plane, method, directions, workers, cap, frame)
+    check_options(plane, method, directions, workers, cap, frame)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,

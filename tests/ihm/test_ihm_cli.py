@@ -24,7 +24,7 @@ from ihm.__main__ import main
 from ihm.render import ARROW_RGBA, RenderError, render_png
 from ihm.rerun_log import log_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PREFERRED = THESIS_SCENES
 
 # Two fingers squeeze a box: a slide finger and a hinge finger, motors, no lights

@@ -13,7 +13,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from train import rotate
+from train import rotation
 from train.pipeline import PipelinedPPO
 from train.seeding import RunSeeds
 from train.vec import ChunkedVecEnv, _chunks, make_vec_env
@@ -34,8 +34,8 @@ def test_chunked_steps_like_dummy_with_resets_and_routing(parts: int) -> None:
     (with 2 parts: worker 0 holds envs 0, 2, 3 and worker 1 envs 1, 4): observations,
     rewards, dones, infos and terminal observations equal DummyVecEnv's, step by step;
     attribute and method calls reach the right env."""
-    cfg = rotate.RotateConfig(episode_steps=8)
-    thunks = [rotate.make_env(cfg, s) for s in RunSeeds(3).envs("train", 5)]
+    cfg = rotation.RotateConfig(episode_steps=8)
+    thunks = [rotation.make_env(cfg, s) for s in RunSeeds(3).envs("train", 5)]
     a, b = DummyVecEnv(thunks), ChunkedVecEnv(thunks, n_workers=2, parts=parts)
     try:
         assert sorted(len(c) for c in b.chunks) == [2, 3]
@@ -76,8 +76,8 @@ def test_chunked_steps_like_dummy_with_resets_and_routing(parts: int) -> None:
 
 
 def test_make_vec_env_and_bad_workers() -> None:
-    cfg = rotate.RotateConfig()
-    thunks = [rotate.make_env(cfg)] * 2
+    cfg = rotation.RotateConfig()
+    thunks = [rotation.make_env(cfg)] * 2
     assert isinstance(make_vec_env(thunks, 0), DummyVecEnv)
     assert isinstance(make_vec_env(thunks[:1], 2), DummyVecEnv)
     with pytest.raises(ValueError, match="n_workers"):
@@ -89,8 +89,8 @@ def test_make_vec_env_and_bad_workers() -> None:
 def test_part_steps_queue_like_dummy() -> None:
     """Part steps, a second one queued before the first is collected, give DummyVecEnv's
     transitions; misuse of the queue raises."""
-    cfg = rotate.RotateConfig(episode_steps=8)
-    thunks = [rotate.make_env(cfg, s) for s in RunSeeds(4).envs("train", 4)]
+    cfg = rotation.RotateConfig(episode_steps=8)
+    thunks = [rotation.make_env(cfg, s) for s in RunSeeds(4).envs("train", 4)]
     a, b = DummyVecEnv(thunks), ChunkedVecEnv(thunks, n_workers=2, parts=2)
     try:
         a.seed(1)
@@ -126,8 +126,8 @@ def _rollout(
     """One 12-step rollout of 8 rotation envs (8-step episodes: timeouts bootstrap), small
     nets, same initial weights and sampling seed: SB3's PPO on DummyVecEnv or PipelinedPPO on
     ChunkedVecEnv(parts=2)."""
-    cfg = rotate.RotateConfig(episode_steps=8)
-    thunks = [rotate.make_env(cfg, s) for s in RunSeeds(3).envs("train", 8)]
+    cfg = rotation.RotateConfig(episode_steps=8)
+    thunks = [rotation.make_env(cfg, s) for s in RunSeeds(3).envs("train", 8)]
     venv = ChunkedVecEnv(thunks, n_workers=2, parts=2) if pipelined else DummyVecEnv(thunks)
     venv.seed(5)
     vec = VecNormalize(venv, training=training, norm_obs=norm_obs)

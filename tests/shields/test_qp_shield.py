@@ -1,4 +1,4 @@
-"""shields.grasp / shields.GraspShield: the linearised-compliance QP shield.
+"""shields.qp / shields.GraspShield: the linearised-compliance QP shield.
 
 Residuals of returned actions under the linear model, idempotence on safe actions, agreement
 of the two QP backends and of an independent solver (cvxpy/Clarabel), the fallback, force
@@ -16,7 +16,8 @@ from stable_baselines3.common.vec_env import SubprocVecEnv
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FourFingerError, FourFingerRotate
 from shields import GraspShield, ShieldError, ShieldLimits
-from shields.grasp import STATUSES, GraspQP, force_closure_wrenches, tilt_angles
+from shields.force_closure import force_closure_wrenches
+from shields.qp import STATUSES, GraspQP, tilt_angles
 from stability import Grasp, gws
 
 INFO_KEYS = (

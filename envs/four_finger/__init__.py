@@ -1,0 +1,64 @@
+"""Four-finger in-hand rotation (thesis ch. 7, sec. "In-hand manipulation with pure RL"):
+the gymnasium env ``ihm/FourFingerRotate-v0``.
+
+- :mod:`~envs.four_finger.physics`: the scene's model with the env's physics settings
+  (timestep, solver, torsional friction, explicit contact pairs) and :class:`Physics`, the
+  model, data and fast contact observation;
+- :mod:`~envs.four_finger.cache`: the starting states, a disk cache of varied stable grasps
+  (:func:`generate_grasps`, :func:`grasp_cache`);
+- :mod:`~envs.four_finger.env`: the env :class:`FourFingerRotate` (its spaces, reward and
+  episode end are documented there) and :func:`yaw_rate`;
+- :mod:`~envs.four_finger.states`: saved env states and one policy step from them under given
+  physics (:func:`save_state`, :func:`policy_step_outcomes`).
+
+Every public name of these modules is importable from ``envs.four_finger``.
+"""
+
+from envs.four_finger.cache import VERIFY_STEPS, GraspCache, generate_grasps, grasp_cache
+from envs.four_finger.env import N_OBS, FourFingerRotate, yaw_rate
+from envs.four_finger.physics import (
+    CONTACT_LINKS,
+    DROP_Z,
+    FRAME_SKIP,
+    MAX_FORCE,
+    OBJECTS,
+    OUT_RADIUS,
+    SOLVER_TOLERANCE,
+    SOLVERS,
+    TIMESTEP,
+    TORSIONAL_FRICTION,
+    FourFingerError,
+    Physics,
+    dynamic_pairs,
+    mixed_contact,
+    scene_name,
+)
+from envs.four_finger.states import STATE_SPEC, policy_step_outcomes, save_state
+
+__all__ = [
+    "CONTACT_LINKS",
+    "DROP_Z",
+    "FRAME_SKIP",
+    "MAX_FORCE",
+    "N_OBS",
+    "OBJECTS",
+    "OUT_RADIUS",
+    "SOLVERS",
+    "SOLVER_TOLERANCE",
+    "STATE_SPEC",
+    "TIMESTEP",
+    "TORSIONAL_FRICTION",
+    "VERIFY_STEPS",
+    "FourFingerError",
+    "FourFingerRotate",
+    "GraspCache",
+    "Physics",
+    "dynamic_pairs",
+    "generate_grasps",
+    "grasp_cache",
+    "mixed_contact",
+    "policy_step_outcomes",
+    "save_state",
+    "scene_name",
+    "yaw_rate",
+]

@@ -1,0 +1,213 @@
+"""The four-finger rotation env's starting states: a cache of varied stable grasps.
+
+A state drawn uniformly from a cache of varied stable grasps (the thesis found
+initial-state randomisation decisive): see :func:`generate_grasps` for the
+generator. Each cached grasp is verified to hold for ``VERIFY_STEPS`` policy
+steps with zero actions. The cache is built on first use (about 10-30 s per
+object and gravity setting) and kept on disk under ``$IHM_CACHE`` (default
+``~/.cache/ihm``), keyed by the model files, the physics settings and the
+MuJoCo version.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+import ihm.scenes
+from envs.four_finger.physics import (
+    FRAME_SKIP,
+    SOLVER_TOLERANCE,
+    TIMESTEP,
+    FourFingerError,
+    Physics,
+    scene_name,
+)
+from ihm.hands import four_finger as ff
+
+__all__ = ["VERIFY_STEPS", "GraspCache", "generate_grasps", "grasp_cache"]
+
+VERIFY_STEPS = 40  # policy steps a cached grasp must hold with zero actions
+_GENERATOR_VERSION = 2  # bump when generate_grasps changes
+
+
+@dataclass(frozen=True)
+class GraspCache:
+    """Cached stable grasps: ``qpos`` (n, nq), ``ctrl`` (n, nu), and how they were made."""
+
+    qpos: NDArray[np.float64]
+    ctrl: NDArray[np.float64]
+    candidates: int  # generator attempts that produced these n grasps
+
+    def __len__(self) -> int:
+        return len(self.qpos)
+
+
+def generate_grasps(
+    obj: str = "sphere",
+    gravity: bool = True,
+    n: int = 256,
+    *,
+    seed: int = 0,
+    timestep: float = TIMESTEP,
+    frame_skip: int = FRAME_SKIP,
+    max_candidates: int | None = None,
+) -> GraspCache:
+    """Varied stable grasps of ``obj``, each verified to hold with zero actions.
+
+    Candidate ``i`` (random stream ``seed``):
+
+    1. the ``init`` keyframe with the object turned by a yaw ``U(-pi, pi)`` about +z,
+       and each finger opened or turned: ``j0 ~ U(-0.3, 0.3)``, ``j1 += U(-0.2, 0)``,
+       ``j2 += U(-0.2, 0)`` [rad];
+    2. the fingers close on it for 0.3 s without gravity, the abduction servos holding
+       ``j0`` and the flexion servos acting as force sources (``ctrl = q + f / kp`` every
+       substep) with the scene's ``ihm_preload`` flexion torques scaled by
+       ``s * U(0.85, 1.15)`` per finger, ``s ~ U(0.7, 2.0)``; then the setpoints are
+       frozen, gravity is switched on and the grasp rests for 0.5 s;
+    3. with probability 0.3 one random finger lets go (its ``j1`` and ``j2``
+       setpoints open by 0.5 rad) and the grasp rests on the other three for 0.5 s;
+    4. kept if the object then stays in the hand for :data:`VERIFY_STEPS` policy
+       steps with the setpoints fixed (zero actions): not dropped, moved less
+       than 5 mm and turned less than 0.1 rad, at least two fingers touching.
+
+    Returns the first ``n`` kept grasps (their state before the check).
+    """
+    scene = scene_name(obj)
+    rng = np.random.default_rng(seed)
+    ph = Physics(obj, gravity, timestep)
+    m, d = ph.model, ph.data
+    key = m.key("init").id
+    preload = ihm.scenes.default_preload(m)
+    grip_steps = int(round(0.3 / timestep))
+    qpos, ctrl = [], []
+    tries = 0
+    cap = max_candidates if max_candidates is not None else 4 * n + 20
+    while len(qpos) < n:
+        if tries >= cap:
+            raise FourFingerError(
+                f"grasp generator for {scene}: only {len(qpos)} of {n} candidates held "
+                f"after {tries} tries"
+            )
+        tries += 1
+        mujoco.mj_resetDataKeyframe(m, d, key)
+        yaw = rng.uniform(-np.pi, np.pi)
+        d.qpos[ph.obj_qpos + 3 : ph.obj_qpos + 7] = [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]
+        q = d.qpos[: ff.NQ].reshape(4, 3)
+        q[:, 0] = rng.uniform(-0.3, 0.3, 4)
+        q[:, 1] += rng.uniform(-0.2, 0.0, 4)
+        q[:, 2] += rng.uniform(-0.2, 0.0, 4)
+        f_c = preload.reshape(4, 3) * (rng.uniform(0.7, 2.0) * rng.uniform(0.85, 1.15, (4, 1)))
+        _close(m, d, q[:, 0].copy(), f_c, grip_steps, gravity)
+        if rng.uniform() < 0.3:
+            k = int(rng.integers(4))
+            d.ctrl[3 * k + 1 : 3 * k + 3] -= 0.5
+            d.ctrl[:] = np.clip(d.ctrl, ph.ctrl_lo, ph.ctrl_hi)
+            mujoco.mj_step(m, d, nstep=int(round(0.5 / timestep)))
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(m, d)
+        if ph.dropped():
+            continue
+        state_q, state_c = d.qpos.copy(), d.ctrl.copy()
+        p0, quat0 = ph.object_pos().copy(), ph.object_quat().copy()
+        mujoco.mj_step(m, d, nstep=VERIFY_STEPS * frame_skip)
+        rot = np.zeros(3)
+        mujoco.mju_subQuat(rot, ph.object_quat(), quat0)
+        _, fn, _ = ph.link_contacts()
+        fingers = int((fn.reshape(4, 2).sum(axis=1) > 1e-3).sum())
+        if (
+            ph.dropped()
+            or np.linalg.norm(ph.object_pos() - p0) > 5e-3
+            or np.linalg.norm(rot) > 0.1
+            or fingers < 2
+        ):
+            continue
+        qpos.append(state_q)
+        ctrl.append(state_c)
+    return GraspCache(np.array(qpos), np.array(ctrl), tries)
+
+
+def _close(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    j0: NDArray[np.float64],
+    f_c: NDArray[np.float64],
+    grip_steps: int,
+    gravity: bool,
+) -> None:
+    """Step 2 of :func:`generate_grasps`: close the fingers by force, freeze, rest."""
+    g = m.opt.gravity.copy()
+    kp = m.actuator_gainprm[:, 0]
+    flex = np.ones(ff.NU, dtype=bool)
+    flex[0::3] = False
+    try:
+        m.opt.gravity[:] = 0.0
+        d.ctrl[~flex] = j0
+        for _ in range(grip_steps):
+            d.ctrl[flex] = d.qpos[: ff.NQ][flex] + f_c.reshape(-1)[flex] / kp[flex]
+            mujoco.mj_step(m, d)
+    finally:
+        m.opt.gravity[:] = g
+    d.ctrl[:] = np.clip(d.ctrl, m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1])
+    mujoco.mj_step(m, d, nstep=grip_steps + grip_steps // 2 + 1)
+
+
+def _cache_dir() -> Path:
+    return Path(os.environ.get("IHM_CACHE", Path.home() / ".cache" / "ihm")) / "grasps"
+
+
+def _cache_key(obj: str, gravity: bool, n: int, seed: int, timestep: float, frame_skip: int) -> str:
+    h = hashlib.sha256()
+    for path in (ihm.scenes.scene_path(scene_name(obj)), ff.XML):
+        h.update(Path(path).read_bytes())
+    settings = (gravity, n, seed, timestep, frame_skip, "pgs", SOLVER_TOLERANCE, "condim4")
+    settings += (mujoco.__version__,)
+    h.update(repr(settings).encode())
+    h.update(repr(_GENERATOR_VERSION).encode())
+    return f"{obj}_{'g' if gravity else 'nog'}_{n}_{h.hexdigest()[:16]}"
+
+
+_MEMORY: dict[str, GraspCache] = {}
+
+
+def grasp_cache(
+    obj: str = "sphere",
+    gravity: bool = True,
+    n: int = 256,
+    *,
+    seed: int = 0,
+    timestep: float = TIMESTEP,
+    frame_skip: int = FRAME_SKIP,
+) -> GraspCache:
+    """:func:`generate_grasps`, memoised in the process and on disk (``$IHM_CACHE``)."""
+    key = _cache_key(obj, gravity, n, seed, timestep, frame_skip)
+    if key in _MEMORY:
+        return _MEMORY[key]
+    path = _cache_dir() / f"{key}.npz"
+    cache = None
+    if path.is_file():
+        try:
+            with np.load(path) as z:
+                cache = GraspCache(z["qpos"], z["ctrl"], int(z["candidates"]))
+        except (OSError, KeyError, ValueError):
+            cache = None  # a broken file is rebuilt
+    if cache is None:
+        cache = generate_grasps(
+            obj, gravity, n, seed=seed, timestep=timestep, frame_skip=frame_skip
+        )
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as f:
+                np.savez(f, qpos=cache.qpos, ctrl=cache.ctrl, candidates=cache.candidates)
+            os.replace(f.name, path)
+        except OSError:
+            pass  # read-only home: keep it in memory only
+    _MEMORY[key] = cache
+    return cache

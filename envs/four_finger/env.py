@@ -1,0 +1,310 @@
+"""Four-finger in-hand rotation (thesis ch. 7, sec. "In-hand manipulation with pure RL").
+
+The 12-DOF four-finger hand (``assets/four_finger``) holds an object (``sphere``,
+``cylinder`` or ``cube``, 0.1 kg, 70 mm; the scenes ``four_finger_<object>``) and
+the policy is rewarded for turning it about the world vertical axis. Gymnasium
+``MujocoEnv`` conventions (``model``, ``data``, ``frame_skip``, ``dt``,
+``render_mode="rgb_array"``), without its ``imageio`` dependency.
+
+## Action Space
+
+``Box(-1, 1, (12,), float32)``, one entry per actuator in the order of
+:data:`ihm.hands.four_finger.ACTUATOR_NAMES` (``f1_j0, f1_j1, f1_j2, f2_j0, ...``).
+The servo setpoints change by ``dq_j = clip(a_j, -1, 1) * max_setpoint_step``
+(0.05 rad, thesis eq. "setpoint change") per policy step and are clipped to the
+joint ranges (the servos' ``ctrlrange``). A NaN/inf action or one of the wrong
+shape raises :class:`FourFingerError`.
+
+## Observation Space
+
+``Box(low, high, (56,), float32)``, the thesis' observation: joint positions,
+actuator setpoints, contact positions and contact normal forces. All positions
+are in the palm frame (= MuJoCo world frame: palm top at ``z = 0``, +z up).
+Bounds: joints ``[-pi, pi]``, setpoints the ``ctrlrange``, contact positions
+``[-0.25, 0.25]`` m (the fingers reach 0.17 m), normal forces ``[0, MAX_FORCE]``
+(50 N; values are clipped to the box, which only an impact spike can reach).
+
+| index | what | MJCF names | unit |
+|-------|------|------------|------|
+| 0-11  | joint positions ``q`` | joints ``f1_j0 .. f4_j2`` | rad |
+| 12-23 | actuator setpoints (``data.ctrl``) | actuators ``f1_j0 .. f4_j2`` | rad |
+| 24-55 | 8 links x (x, y, z, c_n) | geoms ``f1_proximal .. f4_distal`` | m, N |
+
+Link ``k`` (0-7, order of :data:`CONTACT_LINKS`) fills ``24 + 4k .. 27 + 4k``: the
+mean position of that link's contacts with the object and the sum of their
+normal forces (the hand pushing on the object, ``c_n >= 0``; MuJoCo's elliptic
+cone stores it as the contact's first ``efc_force`` row, the value
+``mj_contactForce`` returns); all four zero when the link does not touch the
+object. Contacts between fingers, or of the object with the palm or floor, are
+not observed. Contact data come from the last physics substep's collision
+detection, as in every MuJoCo env.
+
+## Rewards
+
+``reward = rotation + drop + action`` with every term in ``info``:
+
+- ``rotation``: the object's mean angular velocity about the world +z axis over
+  the policy step, ``[log(R_t R_{t-1}^T)]_z / dt`` [rad/s] (positive:
+  counter-clockwise seen from above; the thesis' reward);
+- ``drop``: ``-drop_weight`` on the step that ends the episode by a drop
+  (default weight 0, the thesis' setup);
+- ``action``: ``-action_weight * |a|^2 / 12`` (default 0).
+
+## Episode End
+
+Terminated when the object is dropped or out of the hand: its centre below
+``DROP_Z`` (0.05 m above the palm; held at about 0.077 m, lying on the palm at
+0.035 m) or more than ``OUT_RADIUS`` (0.045 m) from the palm axis horizontally.
+Truncated by the registration's time limit (``ihm/FourFingerRotate-v0``: 64
+steps, the thesis' episode length; ``info["rotation_angle"]`` accumulates the
+turned angle [rad]).
+
+## Starting State
+
+A state drawn uniformly from a cache of varied stable grasps (the thesis found
+initial-state randomisation decisive): see :mod:`envs.four_finger.cache` for the generator
+and the cache. Each cached grasp is verified to hold for ``VERIFY_STEPS`` policy steps with
+zero actions. The cache is built on first use (about 10-30 s per object and gravity setting)
+and kept on disk under ``$IHM_CACHE`` (default ``~/.cache/ihm``).
+
+## Physics
+
+:mod:`envs.four_finger.physics`: 2 ms x 25 substeps, PGS to a tolerance of 1e-4, torsional
+friction, explicit contact pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from envs.four_finger.cache import grasp_cache
+from envs.four_finger.physics import (
+    CONTACT_LINKS,
+    FRAME_SKIP,
+    MAX_FORCE,
+    TIMESTEP,
+    FourFingerError,
+    Physics,
+    scene_name,
+)
+from ihm.hands import four_finger as ff
+
+__all__ = ["N_OBS", "FourFingerRotate", "yaw_rate"]
+
+N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
+
+
+def yaw_rate(quat_before: NDArray[np.float64], quat_after: NDArray[np.float64], dt: float) -> float:
+    """World-z component of the mean angular velocity taking ``quat_before`` to ``quat_after``
+    (MuJoCo ``wxyz`` quaternions) in ``dt`` seconds [rad/s]: ``[log(R_1 R_0^T)]_z / dt``.
+
+    ``mju_quat2Vel(q_1 * conj(q_0), dt)[2]`` in plain float arithmetic (4x cheaper here)."""
+    w0, x0, y0, z0 = quat_before.tolist()
+    w1, x1, y1, z1 = quat_after.tolist()
+    # rel = q_1 * conj(q_0): the rotation in the world frame
+    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
+    y = -w1 * y0 + x1 * z0 + y1 * w0 - z1 * x0
+    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    sin_half = math.sqrt(x * x + y * y + z * z)
+    if sin_half < mujoco.mjMINVAL:
+        return 0.0
+    angle = 2.0 * math.atan2(sin_half, w)
+    if angle > math.pi:
+        angle -= 2.0 * math.pi
+    return z / sin_half * angle / dt
+
+
+class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Rotate a held object about the vertical axis with the four-finger hand.
+
+    Parameters
+    ----------
+    object : ``"sphere"`` (the thesis'), ``"cylinder"`` or ``"cube"``.
+    gravity : gravity on (-9.81 m/s^2 along -z) or off.
+    max_setpoint_step : ``q^max`` of the thesis [rad per policy step].
+    frame_skip : physics substeps per policy step.
+    timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
+    drop_weight, action_weight : weights of the optional reward terms (module doc).
+    n_grasps : size of the starting-state cache.
+    render_mode : ``None`` or ``"rgb_array"``; ``width``, ``height`` [px];
+        ``camera``: ``"side"`` or ``"top"``.
+    torsional : contacts with the skin's torsional friction (``condim`` 4, coefficient
+        ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m x the normal force,
+        that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis' point
+        contact), a sphere pinched between two antipodal points spins freely about the
+        line through them, and PPO learned exactly that (README).
+    solver : MuJoCo constraint solver, ``"pgs"`` (default) or ``"newton"`` (the hand
+        model's). Both solve the same convex contact problem; PGS is 5x cheaper on it.
+
+    Attributes: ``physics`` (:class:`~envs.four_finger.physics.Physics`: ``model``, ``data``
+    and the contact observation), ``grasps`` (the :class:`~envs.four_finger.cache.GraspCache`
+    of starting states).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        object: str = "sphere",
+        gravity: bool = True,
+        *,
+        max_setpoint_step: float = 0.05,
+        frame_skip: int = FRAME_SKIP,
+        timestep: float = TIMESTEP,
+        drop_weight: float = 0.0,
+        action_weight: float = 0.0,
+        n_grasps: int = 256,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        camera: str = "side",
+        solver: str = "pgs",
+        torsional: bool = True,
+    ) -> None:
+        scene_name(object)
+        if not isinstance(gravity, (bool, np.bool_)):
+            raise FourFingerError(f"gravity must be True or False, got {gravity!r}")
+        for name, v in (
+            ("max_setpoint_step", max_setpoint_step),
+            ("timestep", timestep),
+            ("drop_weight", drop_weight),
+            ("action_weight", action_weight),
+        ):
+            if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
+        if max_setpoint_step <= 0 or timestep <= 0:
+            raise FourFingerError("max_setpoint_step and timestep must be > 0")
+        if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
+            raise FourFingerError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
+        if not isinstance(n_grasps, (int, np.integer)) or n_grasps < 1:
+            raise FourFingerError(f"n_grasps must be an integer >= 1, got {n_grasps!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise FourFingerError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if camera not in ("side", "top"):
+            raise FourFingerError(f"camera must be 'side' or 'top', got {camera!r}")
+        self.object = object
+        self.gravity = bool(gravity)
+        self.max_setpoint_step = float(max_setpoint_step)
+        self.frame_skip = int(frame_skip)
+        self.drop_weight = float(drop_weight)
+        self.action_weight = float(action_weight)
+        self.render_mode = render_mode
+        self.width, self.height, self.camera = width, height, camera
+        self.physics = Physics(object, self.gravity, float(timestep), solver, bool(torsional))
+        self.model, self.data = self.physics.model, self.physics.data
+        self.dt = self.model.opt.timestep * self.frame_skip
+        self.grasps = grasp_cache(
+            object,
+            self.gravity,
+            int(n_grasps),
+            timestep=float(timestep),
+            frame_skip=self.frame_skip,
+        )
+        self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
+        lo = np.concatenate(
+            [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
+        )
+        hi = np.concatenate(
+            [np.full(ff.NQ, np.pi), self.physics.ctrl_hi, np.tile([0.25, 0.25, 0.25, MAX_FORCE], 8)]
+        )
+        self.observation_space = spaces.Box(lo.astype(np.float32), hi.astype(np.float32))
+        self._lo, self._hi = self.observation_space.low, self.observation_space.high
+        self._obs = np.zeros(N_OBS, dtype=np.float32)
+        self._quat = np.zeros(4)
+        self._angle = 0.0
+        self._renderer: Any = None
+
+    # -- observation ------------------------------------------------------------------------
+    def observe(self) -> NDArray[np.float32]:
+        """The observation of the current state (module doc, "Observation Space")."""
+        d, o = self.data, self._obs
+        o[: ff.NQ] = d.qpos[: ff.NQ]
+        o[ff.NQ : 2 * ff.NU] = d.ctrl
+        pos, fn, _ = self.physics.link_contacts()
+        c = o[2 * ff.NU :].reshape(len(CONTACT_LINKS), 4)
+        c[:, :3] = pos
+        c[:, 3] = fn
+        return np.minimum(np.maximum(o, self._lo), self._hi)
+
+    def _yaw_rate(self, quat_before: NDArray[np.float64]) -> float:
+        """Mean angular velocity about world +z since ``quat_before`` [rad/s]."""
+        return yaw_rate(quat_before, self.physics.object_quat(), self.dt)
+
+    # -- gym API ----------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        """Start from a cached stable grasp (``options={"grasp": i}`` picks one)."""
+        super().reset(seed=seed)
+        i = None if options is None else options.get("grasp")
+        if i is None:
+            i = int(self.np_random.integers(len(self.grasps)))
+        elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):
+            raise FourFingerError(f"options['grasp'] must be in [0, {len(self.grasps)}), got {i!r}")
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = self.grasps.qpos[i]
+        d.ctrl[:] = self.grasps.ctrl[i]
+        mujoco.mj_forward(m, d)
+        self._angle = 0.0
+        return self.observe(), {"grasp": i, "rotation_angle": 0.0}
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (ff.NU,):
+            raise FourFingerError(f"action must have shape ({ff.NU},), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise FourFingerError(f"action contains NaN or inf: {a}")
+        a = np.minimum(np.maximum(a, -1.0), 1.0)  # np.clip's Python wrapper costs 3x more
+        d, ph = self.data, self.physics
+        ctrl = d.ctrl + a * self.max_setpoint_step
+        np.minimum(np.maximum(ctrl, ph.ctrl_lo, out=ctrl), ph.ctrl_hi, out=d.ctrl)
+        self._quat[:] = ph.object_quat()
+        mujoco.mj_step(self.model, d, nstep=self.frame_skip)
+        rate = self._yaw_rate(self._quat)
+        self._angle += rate * self.dt
+        dropped = ph.dropped()
+        terms = {
+            "rotation": rate,
+            "drop": -self.drop_weight if dropped else 0.0,
+            "action": -self.action_weight * float(a @ a) / ff.NU,
+        }
+        reward = terms["rotation"] + terms["drop"] + terms["action"]
+        info = {**terms, "dropped": dropped, "rotation_angle": self._angle}
+        return self.observe(), reward, dropped, False, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """An RGB frame (``height, width, 3``) from the side or top camera."""
+        if self.render_mode != "rgb_array":
+            return None
+        from ihm.render import make_renderer
+
+        if self._renderer is None:
+            vis = self.model.vis
+            vis.global_.offwidth = max(vis.global_.offwidth, self.width)
+            vis.global_.offheight = max(vis.global_.offheight, self.height)
+            if self.model.nlight == 0:  # the scenes have no lights: a brighter headlight
+                vis.headlight.ambient[:] = np.maximum(vis.headlight.ambient, 0.35)
+                vis.headlight.diffuse[:] = np.maximum(vis.headlight.diffuse, 0.6)
+            self._renderer = make_renderer(self.model, self.width, self.height)
+        cam = mujoco.MjvCamera()
+        cam.lookat[:] = [0.0, 0.0, 0.06]
+        cam.distance = 0.32
+        cam.azimuth, cam.elevation = (45.0, -20.0) if self.camera == "side" else (90.0, -89.0)
+        self._renderer.update_scene(self.data, camera=cam)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

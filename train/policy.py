@@ -1,0 +1,92 @@
+"""Trained policies as functions: loading a run's or a shipped policy and evaluating it.
+
+:func:`load_policy` turns a run directory (``policy.pt`` or ``model.zip``, with
+``vecnormalize.pkl`` and ``config.json``) into a deterministic ``obs -> action`` function
+and the env options it was trained with; :data:`SHIPPED` is the shipped four-finger policy
+(``policies/four_finger_sphere``). :func:`evaluate` runs such a function on
+``FourFingerRotate`` from start grasps drawn with given seeds (the evaluation loop of
+:mod:`train.evaluation`). Used by ``python -m train.gait``, ``python -m train.rollout`` and
+the policy-based benchmarks (:mod:`train.bench`).
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from stable_baselines3 import PPO
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
+from train.evaluation import RotationEpisode, one_by_one, run_episodes
+from train.rotation import env_physics
+
+__all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy"]
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "policies" / "four_finger_sphere"
+
+
+def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:
+    """A deterministic ``obs -> action`` function and the run's env options.
+
+    ``run_dir`` holds ``policy.pt`` (SB3 ``ActorCriticPolicy.save``) or ``model.zip``, plus
+    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``.
+    """
+    if (run_dir / "policy.pt").is_file():
+        policy = ActorCriticPolicy.load(str(run_dir / "policy.pt"), device="cpu")
+    else:
+        policy = PPO.load(run_dir / "model.zip", device="cpu").policy
+    with (run_dir / "vecnormalize.pkl").open("rb") as f:
+        norm = pickle.load(f)
+    cfg = json.loads((run_dir / "config.json").read_text())
+    mean, var = norm.obs_rms.mean, norm.obs_rms.var
+    clip, eps = norm.clip_obs, norm.epsilon
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        x = np.clip((obs - mean) / np.sqrt(var + eps), -clip, clip).astype(np.float32)
+        a, _ = policy.predict(x, deterministic=True)
+        return a
+
+    keys = {"object": "sphere", "gravity": True, "torsional": True}
+    kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
+    return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
+
+
+def evaluate(
+    act: Callable[[np.ndarray], np.ndarray],
+    env_kwargs: dict,
+    episodes: int,
+    seconds: float,
+    seed: int = 0,
+    start_grasps: GraspCache | None = None,
+) -> dict[str, float]:
+    """Deterministic policy over ``episodes`` episodes of ``seconds`` from start grasps drawn
+    with ``seed`` (episode ``i``: ``env.reset(seed=seed + i)``): mean/median speed [rad/s]
+    (turned angle / episode time; a drop ends an episode) and drop rate. ``start_grasps``: a
+    :class:`envs.four_finger.GraspCache` to start from instead of the env's own (the same
+    start states under other physics)."""
+    env = FourFingerRotate(**env_kwargs)
+    if start_grasps is not None:
+        env.grasps = start_grasps
+    n = int(round(seconds / env.dt))
+    eps = run_episodes(
+        [env],
+        episodes,
+        one_by_one(act),
+        RotationEpisode,
+        reset_seed=lambda i, ep: seed + ep,
+        max_steps=n,
+    )
+    env.close()
+    speeds = [e["speed_rad_s"] for e in eps]
+    return {
+        "episodes": episodes,
+        "speed_rad_s": float(np.mean(speeds)),
+        "speed_median_rad_s": float(np.median(speeds)),
+        "speed_p10_rad_s": float(np.percentile(speeds, 10)),
+        "drop_rate": float(np.mean([e["dropped"] for e in eps])),
+    }

@@ -1,0 +1,224 @@
+"""Plumbing shared by the PPO trainers (stable-baselines3): configs, run directories, the model.
+
+The trainers (:mod:`train.rotation`, the main job, and :mod:`train.islands_ppo`) follow the
+CleanRL shape: one dataclass config whose every field is a command-line option
+(:func:`opt`, :func:`build_parser`), the seeds set in one block (:func:`seed_everything`
+with :class:`train.seeding.RunSeeds`), a run directory with its config.json
+(:func:`open_run`, resumable: :func:`saved_timesteps`), SB3 PPO built from the config
+(:func:`new_ppo`) and a progress bar over env steps whose rate and time left cover the
+whole run, PPO updates and evaluations included (:class:`TqdmProgress`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import random
+import zipfile
+from collections.abc import Callable, Sequence
+from dataclasses import field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+from tqdm import tqdm
+
+from stability.cli import ArgumentParser
+
+__all__ = [
+    "TqdmProgress",
+    "build_parser",
+    "new_ppo",
+    "normalizer",
+    "open_run",
+    "opt",
+    "option_problems",
+    "progress_bar",
+    "saved_timesteps",
+    "seed_everything",
+]
+
+
+def opt(default: Any, help: str, **kw: Any) -> Any:
+    """A dataclass field with its ``--help`` text (and argparse extras such as choices)."""
+    if isinstance(default, list):
+        return field(default_factory=lambda: list(default), metadata={"help": help, **kw})
+    return field(default=default, metadata={"help": help, **kw})
+
+
+def _type_of(f: dataclasses.Field) -> tuple[Callable[[str], Any], bool]:
+    """The scalar argparse ``type`` of a field and whether it is a list."""
+    t = str(f.type)
+    if t.startswith("list["):
+        return {"list[int]": int, "list[float]": float}.get(t, str), True
+    for name, conv in (("bool", bool), ("int", int), ("float", float)):
+        if t == name:
+            return conv, False
+    return str, False
+
+
+def build_parser(
+    cls: type, prog: str = "python -m train.ppo", description: str | None = None
+) -> argparse.ArgumentParser:
+    """An argparse parser generated from the fields of the dataclass ``cls``.
+
+    Each field ``foo_bar`` becomes ``--foo-bar`` with the field's ``help`` and
+    ``choices`` metadata; bools become ``--x/--no-x``, lists take several values. Errors
+    print one line (:class:`stability.cli.ArgumentParser`) and exit with status 2.
+    """
+    p = ArgumentParser(
+        prog=prog,
+        description=description,
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    for f in dataclasses.fields(cls):
+        flag = "--" + f.name.replace("_", "-")
+        conv, is_list = _type_of(f)
+        default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+        kw: dict[str, Any] = {"help": f.metadata["help"], "default": default, "dest": f.name}
+        if "choices" in f.metadata:
+            kw["choices"] = f.metadata["choices"]
+        if conv is bool:
+            p.add_argument(flag, action=argparse.BooleanOptionalAction, **kw)
+        elif is_list:
+            p.add_argument(flag, type=conv, nargs="+", metavar="N" if conv is int else None, **kw)
+        else:
+            p.add_argument(flag, type=conv, **kw)
+    return p
+
+
+def option_problems(cfg: Any, positive: Sequence[str]) -> list[str]:
+    """The checks every PPO config shares: the fields ``positive`` >= 1, net sizes >= 1,
+    ``seed >= 0`` and a ``--resume`` directory that holds a model.zip."""
+    problems = [f"--{k.replace('_', '-')} must be >= 1" for k in positive if getattr(cfg, k) < 1]
+    problems += [f"--{k}: sizes must be >= 1" for k in ("pi", "vf") if min(getattr(cfg, k)) < 1]
+    if cfg.seed < 0:
+        problems.append("--seed must be >= 0")
+    if cfg.resume is not None and not (Path(cfg.resume) / "model.zip").is_file():
+        problems.append(f"--resume {cfg.resume}: no model.zip there")
+    return problems
+
+
+def open_run(cfg: Any, name: str, keep: Sequence[str]) -> tuple[Any, Path]:
+    """The config and directory of a run.
+
+    With ``cfg.resume``: the saved config.json of that run, except the fields ``keep`` (and
+    ``resume``), which come from ``cfg`` (the saved run decides everything except how long
+    to go on and how to report). Otherwise a new directory ``cfg.out/name`` (``_`` appended
+    while it exists) with ``cfg`` written to config.json.
+    """
+    cls = type(cfg)
+    if cfg.resume is not None:
+        run_dir = Path(cfg.resume)
+        saved = json.loads((run_dir / "config.json").read_text())
+        fields = cls.__dataclass_fields__
+        restored = cls(**{k: v for k, v in saved.items() if k in fields})
+        return dataclasses.replace(
+            restored, resume=cfg.resume, **{k: getattr(cfg, k) for k in keep}
+        ), run_dir
+    run_dir = Path(cfg.out) / name
+    while run_dir.exists():  # two runs started in the same second
+        run_dir = run_dir.with_name(run_dir.name + "_")
+    run_dir.mkdir(parents=True)
+    config = {**dataclasses.asdict(cfg), "resume": None}
+    (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    return cfg, run_dir
+
+
+def saved_timesteps(run_dir: Path) -> int:
+    """``num_timesteps`` of the PPO model saved in ``run_dir/model.zip``."""
+    with zipfile.ZipFile(run_dir / "model.zip") as z:
+        return int(json.loads(z.read("data"))["num_timesteps"])
+
+
+def seed_everything(seed: int) -> None:
+    """Python, numpy's legacy global generator and torch (envs are seeded where they are built).
+
+    Call with :attr:`train.seeding.RunSeeds.global_seed`.
+    """
+    random.seed(seed)
+    np.random.seed(seed)  # noqa: NPY002  (SB3 and Gymnasium wrappers may use the global RNG)
+    torch.manual_seed(seed)
+    torch.backends.cudnn.deterministic = True
+
+
+def new_ppo(
+    cfg: Any,
+    vec_env: VecEnv,
+    learning_rate: float | Callable[[float], float],
+    algo: type[PPO] = PPO,
+) -> PPO:
+    """SB3 PPO (or the subclass ``algo``) from a config's settings: separate policy and value
+    nets ``cfg.pi``/``cfg.vf``, CPU, and ``seed=None``: SB3's own seeding would reset the envs
+    with ``seed + i`` (the VecEnv's consecutive seeds), undoing :mod:`train.seeding`; call
+    :func:`seed_everything` first (the policy's initial weights come from torch's global
+    generator)."""
+    return algo(
+        "MlpPolicy",
+        vec_env,
+        learning_rate=learning_rate,
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        policy_kwargs={
+            "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
+            "log_std_init": cfg.log_std_init,
+        },
+        seed=None,
+        device="cpu",
+        verbose=cfg.verbose,
+    )
+
+
+def normalizer(train_env: VecEnv) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The training env's observation normalisation (frozen: it does not update the statistics),
+    or ``None`` without ``VecNormalize``."""
+    return train_env.normalize_obs if isinstance(train_env, VecNormalize) else None
+
+
+class TqdmProgress(BaseCallback):
+    """A plain tqdm progress bar over env steps (SB3's own bar needs ``rich``).
+
+    The bar counts env steps, but its rate and time left are the averages over the whole
+    elapsed time (``smoothing=0``), so the PPO updates and the evaluations between rollouts
+    count: the time left is that of the rest of the run, not of the rest of the env steps
+    alone (with tqdm's default smoothing the rate was that of the last rollout's steps, and
+    the time left a fraction of the real one)."""
+
+    def __init__(self, total: int, desc: str = "") -> None:
+        super().__init__()
+        self.total, self.desc = total, desc
+        self.rate = float("nan")
+
+    def _on_training_start(self) -> None:
+        self.bar = tqdm(
+            total=self.total, desc=self.desc, unit="step", dynamic_ncols=True, smoothing=0
+        )
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.training_env.num_envs)
+        return True
+
+    def _on_rollout_start(self) -> None:
+        self.bar.refresh()  # after an update or evaluation: the time left counts it
+
+    def _on_training_end(self) -> None:
+        d = self.bar.format_dict
+        self.rate = d["n"] / d["elapsed"] if d["elapsed"] > 0 else float("nan")
+        self.bar.close()
+
+
+def progress_bar(cfg: Any, desc: str = "") -> TqdmProgress:
+    """A :class:`TqdmProgress` over the steps ``learn(cfg.total_steps)`` will take: it stops at
+    the first rollout end past the budget."""
+    rollout = cfg.n_steps * cfg.n_envs
+    return TqdmProgress(-(-cfg.total_steps // rollout) * rollout, desc=desc)
