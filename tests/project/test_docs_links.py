@@ -39,3 +39,12 @@ def test_relative_links_resolve(page: Path) -> None:
         if not (page.parent / path).exists():
             missing.append(target)
     assert not missing, f"{page.relative_to(ROOT)}: broken links {missing}"
+
+
+def test_readme_is_a_front_page() -> None:
+    """At most 300 lines, and the two set-up commands on the first screen (40 lines)."""
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 300, f"README.md has {len(lines)} lines"
+    first = "\n".join(lines[:40])
+    assert "pip install -e . && python -m train.ppo" in first
+    assert 'pip install -e ".[test]" && python -m pytest' in first
