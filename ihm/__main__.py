@@ -32,6 +32,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stability import GraspError  # noqa: E402
+from stability.cli import ArgumentParser
 
 from . import scenes  # noqa: E402
 from .contacts import SceneGrasp, grasp_from_mujoco  # noqa: E402
@@ -40,7 +41,7 @@ PROG = "python -m ihm"
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog=PROG,
         description="Grasp scenes of the thesis on MuJoCo: list them, or settle one and "
         "show its contacts and forces (table, PNG, rerun recording).",
@@ -104,7 +105,7 @@ def _parser() -> argparse.ArgumentParser:
         "--method",
         nargs="+",
         default=["sim"],
-        help="one or more of sim (MuJoCo), refinement, iterative, no_mdp, spatial, gws "
+        help="one or more of sim (MuJoCo), refinement, iterative, no_mdp, exact, gws "
         "(default sim); maps are overlaid",
     )
     mp_.add_argument(

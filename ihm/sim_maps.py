@@ -10,7 +10,7 @@ its directions (the same numbers for any number of workers). The result is a
 polar PNG with :func:`stability.maps.plot_resistible`.
 
 Any stability method that answers MaxDisturbance on spatial grasps (``refinement``,
-``iterative``, ``no_mdp``, ``spatial``, ``gws``) maps the same directions on the grasp read
+``iterative``, ``no_mdp``, ``exact``, ``gws``) maps the same directions on the grasp read
 off the settled scene (:func:`ihm.contacts.grasp_from_mujoco`): the load is the same force
 through the object's centre of mass, written in the object frame as the wrench
 ``(R^T u, c x R^T u)`` about the object origin (``c`` the centre of mass in the object
@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from stability import GraspError
+from stability.api import RENAMED_METHODS
 from stability.maps import ResistibleMap, plane_axes, plot_resistible
 
 from . import scenes
@@ -50,7 +51,7 @@ __all__ = [
     "write_map_csv",
 ]
 
-METHODS = ("sim", "refinement", "iterative", "no_mdp", "spatial", "gws")
+METHODS = ("sim", "refinement", "iterative", "no_mdp", "exact", "gws")
 
 
 class MapError(GraspError):
@@ -68,7 +69,7 @@ def check_options(plane: str, method: str, directions: int, workers: int, cap: f
         plane_axes(plane)
     except GraspError as exc:
         raise MapError(str(exc)) from None
-    if method not in METHODS:
+    if method not in METHODS and method not in RENAMED_METHODS:  # old names: solve() warns
         raise MapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if int(directions) < 1 or int(workers) < 1:
         raise MapError(f"directions and workers must be >= 1, got {directions}, {workers}")

@@ -67,7 +67,7 @@ G) K J``). ``^+`` is the pseudo-inverse: an object direction that no contact sti
 holds (two point contacts: the spin about the line through them) gets no motion.
 
 What the linearisation leaves out (its accuracy is measured in tests/shields/test_compliance.py and
-``python -m shields.bench accuracy``): contacts that roll or slide, contacts that make or
+``python -m train.bench shield accuracy``): contacts that roll or slide, contacts that make or
 break, the change of the contact frames with the motion (Cutkosky's geometric stiffness), the
 servo's force limit (a saturated servo does not follow its setpoint), the dynamics within the
 step,

@@ -14,7 +14,6 @@ its 3-contact grasp.
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .api import solve
+from .cli import ArgumentParser
 from .errors import GraspError
 from .grasp import Grasp
 from .planar import max_disturbance_map
@@ -223,7 +223,7 @@ def bench(
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ArgumentParser(prog="python -m stability.maps", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="bench_out/planar_maps.png", help="PNG path")
     ap.add_argument("--directions", type=int, default=360)
     ap.add_argument(

@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
+
+from stability.cli import ArgumentParser
 
 from . import EXPERIMENTS, ExperimentError, run_experiment
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="python -m ihm.experiments",
         description="The thesis' grasp experiments, predicted and simulated in MuJoCo.",
     )

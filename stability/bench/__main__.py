@@ -6,11 +6,13 @@ from __future__ import annotations
 import argparse
 import importlib
 
+from stability.cli import ArgumentParser
+
 BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff")
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="python -m stability.bench",
         description=importlib.import_module("stability.bench").__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
