@@ -21,7 +21,6 @@ the commands are the preload the scene was settled with. Directions whose solve 
 
 from __future__ import annotations
 
-import csv
 import multiprocessing as mp
 import time
 from collections.abc import Sequence
@@ -34,6 +33,7 @@ from numpy.typing import ArrayLike
 
 from stability import GraspError
 from stability.api import RENAMED_METHODS
+from stability.io import write_csv
 from stability.maps import ResistibleMap, plane_axes, plot_resistible
 
 from . import scenes
@@ -309,13 +309,14 @@ def agreement(pred: ResistibleMap, sim: ResistibleMap) -> dict[str, float]:
 def write_map_csv(path: Path, maps: Sequence[tuple[str, ResistibleMap]]) -> Path:
     """One row per (label, direction): label, method, plane, angle_deg, force_N, capped."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["label", "method", "plane", "angle_deg", "force_N", "capped"])
-        for label, rm in maps:
-            for a, v, c in zip(rm.angles, rm.magnitudes, rm.capped, strict=True):
-                w.writerow([label, rm.method, rm.plane, round(float(np.degrees(a)), 4), v, int(c)])
-    return path
+    rows = [
+        {"label": label, "method": rm.method, "plane": rm.plane,
+         "angle_deg": round(float(np.degrees(a)), 4), "force_N": v, "capped": int(c)}
+        for label, rm in maps
+        for a, v, c in zip(rm.angles, rm.magnitudes, rm.capped, strict=True)
+    ]  # fmt: skip
+    cols = ["label", "method", "plane", "angle_deg", "force_N", "capped"]
+    return write_csv(path, rows, columns=cols)
 
 
 def plot_maps(path: Path, maps: Sequence[tuple[str, ResistibleMap]], title: str) -> Path:
@@ -389,9 +390,8 @@ def run(
         if method != "sim" and what in sims:
             agree.append((label, what, agreement(rm, sims[what])))
     if agree:
-        with (out / f"{stem}_agreement.csv").open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["map", "commands", *agree[0][2]])
-            for label, what, a in agree:
-                w.writerow([label, what, *a.values()])
+        write_csv(
+            out / f"{stem}_agreement.csv",
+            [{"map": label, "commands": what, **a} for label, what, a in agree],
+        )
     return csv_path, png, walls, agree

@@ -10,7 +10,6 @@ Predictions use the grasp read off the same settled state (:func:`ihm.sim_maps.a
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ import mujoco
 import numpy as np
 
 from stability import MaxDisturbance, OptimalCommands, solve
+from stability.io import write_csv
 from stability.maps import ResistibleMap, plot_resistible
 
 from .. import scenes
@@ -226,11 +226,10 @@ def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         summary[f"xy map, {case}"] = _summarise_maps(maps, walls)
         panels.append((f"xy-plane, preload {case} only", maps))
         all_maps += [(f"{case}, {label}", rm) for label, rm in maps]
-    with (out / "barrett_box_3d.csv").open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["case", "method", "direction", "value", "capped"])
-        for case, method, v, c in rows:
-            w.writerow([case, method, "+x", v, int(c)])
+    cols = ["case", "method", "direction", "value", "capped"]
+    write_csv(out / "barrett_box_3d.csv",
+              [dict(zip(cols, (case, method, "+x", v, int(c)), strict=True))
+               for case, method, v, c in rows], cols)  # fmt: skip
     write_map_csv(out / "barrett_box_3d_xy.csv", all_maps)
     _panels(out / "barrett_box_3d.png", panels,
             "barrett_box_3d (thesis grasp example 2): resistible force [N], object xy-plane, "
@@ -269,10 +268,8 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
                 rows.append((tau3, name, "sim", sim.value, sim.capped, sim.reason, 0.0))
             else:  # the thumb pushed the object out before any load
                 rows.append((tau3, name, "sim", 0.0, False, "slid out at rest", 0.0))
-    with (out / "barrett_cube.csv").open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["tau3_Nm", "load", "method", "value", "capped", "status", "wall_s"])
-        w.writerows(rows)
+    cols = ["tau3_Nm", "load", "method", "value", "capped", "status", "wall_s"]
+    write_csv(out / "barrett_cube.csv", [dict(zip(cols, r, strict=True)) for r in rows], cols)
     _cube_plot(out / "barrett_cube.png", rows, taus)
     summary: dict[str, Any] = {"seat": seat, "tau3": taus}
     for name in loads:

@@ -30,7 +30,6 @@ runner writes to ``OUT/tendon_box_summary.json``.
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from stability import Existence, MaxDisturbance, solve
+from stability.io import write_csv
 
 from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
@@ -448,8 +448,6 @@ def tendon_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, An
         "wall_s": {"sim": t_sim, "refinement": t_pred},
     }
     summary["wall_s"] = {"torque_part": t_map0 - t_start, "total": time.perf_counter() - t_start}
-    with (out / "tendon_box.csv").open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["case", "method", "direction", "value", "unit", "capped"])
-        w.writerows(rows)
+    cols = ["case", "method", "direction", "value", "unit", "capped"]
+    write_csv(out / "tendon_box.csv", [dict(zip(cols, r, strict=True)) for r in rows], cols)
     return summary
