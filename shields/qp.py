@@ -37,7 +37,7 @@ construction of :mod:`stability.gws`; the test: :mod:`shields.force_closure`), i
 contacts, which need three contacts.
 ``ShieldLimits(soft_closure=True)`` adds the torsional rays ``c_tau = +-mu_tau c_n`` of
 condim-4 contacts (soft fingers), so that two fingertips can be a candidate; measured,
-that shield releases more and drops the object more often (README), so it is not the
+that shield releases more and drops the object more often (docs/shields.md), so it is not the
 default. The servos of the
 unshielded links' kinematic chains keep the agent's action. The candidate with the
 smallest ``||a~ - a||`` wins, ties to the one that shields more links. For speed, each
@@ -111,11 +111,11 @@ class ShieldLimits:
     relax_contacts : off (default, the thesis): a shielded contact must end the step inside
         its constraints. On: a contact row the current state already violates (a contact
         sliding on MuJoCo's cone lies outside the inscribed pyramid) only must not get
-        worse, as the box and tilt bounds (an ablation; README, "QP shield")
+        worse, as the box and tilt bounds (an ablation; docs/shields.md)
     soft_closure : off (default): force closure of a link set is tested with point contacts
         (the polygon's vertices only), so at least three contacts are needed. On: with the
         torsional rays of condim-4 contacts too (soft fingers), so two fingertips can be a
-        candidate. Measured: on, the shield releases more and drops more (README)
+        candidate. Measured: on, the shield releases more and drops more (docs/shields.md)
     """
 
     c_min: float = 0.05

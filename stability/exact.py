@@ -42,7 +42,7 @@ cone and maximum dissipation) before it is returned: force conditions within
 ``1e-6 (1 + B)``, dissipation within that times the motion's scale; anything worse is
 ``status="error"``, never a silent wrong answer. This is global optimisation: exact up
 to SCIP's tolerances and the gap, and its time grows quickly with the number of contacts
-(``python -m stability.bench tradeoff``; README).
+(``python -m stability.bench tradeoff``; docs/bench/stability.md).
 """
 
 from __future__ import annotations

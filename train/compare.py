@@ -1,4 +1,4 @@
-"""Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PNG``.
+"""Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PATH``.
 
 Groups run directories of :mod:`train.rotation` (``python -m train.ppo``) by their shield
 (``config.json``: ``none`` or ``qp``) and charts, over env steps, the training episode

@@ -102,7 +102,7 @@ class RotateConfig:
     timestep: float = opt(
         TIMESTEP,
         "physics timestep [s]; the policy period stays 0.05 s (0.05 / timestep substeps). "
-        "0.0025: about 20 %% faster, coarser (README, 'Throughput')",
+        "0.0025: about 20 %% faster, coarser (docs/bench/four_finger_env.md)",
     )
     shield: str = opt(
         "none",
@@ -149,7 +149,12 @@ class RotateConfig:
 
 def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
     """Parse the command line into a :class:`RotateConfig` (exit 2 on bad options)."""
-    parser = build_parser(RotateConfig, description=(__doc__ or "").split("\n\n")[0])
+    parser = build_parser(
+        RotateConfig,
+        description=(__doc__ or "").split("\n\n")[0],
+        epilog="The islands-and-bridges toy: python -m train.ppo islands [options] "
+        "(python -m train.ppo islands --help).",
+    )
     cfg = RotateConfig(**vars(parser.parse_args(argv)))
     ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
     problems = option_problems(cfg, ints)

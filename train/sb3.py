@@ -63,7 +63,10 @@ def _type_of(f: dataclasses.Field) -> tuple[Callable[[str], Any], bool]:
 
 
 def build_parser(
-    cls: type, prog: str = "python -m train.ppo", description: str | None = None
+    cls: type,
+    prog: str = "python -m train.ppo",
+    description: str | None = None,
+    epilog: str | None = None,
 ) -> argparse.ArgumentParser:
     """An argparse parser generated from the fields of the dataclass ``cls``.
 
@@ -74,6 +77,7 @@ def build_parser(
     p = ArgumentParser(
         prog=prog,
         description=description,
+        epilog=epilog,
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     for f in dataclasses.fields(cls):

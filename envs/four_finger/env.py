@@ -140,7 +140,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m x the normal force,
         that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis' point
         contact), a sphere pinched between two antipodal points spins freely about the
-        line through them, and PPO learned exactly that (README).
+        line through them, and PPO learned exactly that (docs/four_finger.md).
     solver : MuJoCo constraint solver, ``"pgs"`` (default) or ``"newton"`` (the hand
         model's). Both solve the same convex contact problem; PGS is 5x cheaper on it.
 

@@ -9,8 +9,8 @@ with ``impratio`` 100 and no noslip pass (see the hand model's "Physics" note), 
 instead of the model's Newton solver: the same convex problem, 5x cheaper to solve here, to a
 tolerance of 1e-4 (``SOLVER_TOLERANCE``; MuJoCo's 1e-8 takes about 60 % more iterations, and
 one policy step differs from it by under 1 % of what halving the timestep changes: tested;
-at rest it changes MuJoCo's creep of a held object by up to 1e-4 m/s per contact; README,
-"Throughput"). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the
+at rest it changes MuJoCo's creep of a held object by up to 1e-4 m/s per contact;
+docs/bench/four_finger_env.md). The 34 contacts the scene's ``contype``/``conaffinity`` allow (the
 object with the 8 links, palm and catch plane; links of different fingers) are explicit
 ``<pair>``s with the parameters MuJoCo would mix for them, so that no broadphase runs: the
 same contacts in the same order with the same parameters, hence the same motion bit for bit
@@ -159,7 +159,7 @@ def _load_model(
     explicit ``<pair>`` with the parameters MuJoCo would mix for it, and the geoms' own
     collision bits are cleared, so that no broadphase runs. The same contacts in the same
     order with the same parameters, the same trajectories bit for bit (tested), about 5 % less
-    time per substep (README, "Throughput")."""
+    time per substep (docs/bench/four_finger_env.md)."""
     if solver not in SOLVERS:
         raise FourFingerError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     spec = mujoco.MjSpec.from_file(str(ihm.scenes.scene_path(scene_name(obj))))
