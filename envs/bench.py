@@ -191,11 +191,12 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     moved = [cmd for name, cmd in MOVED.items() if getattr(a, name) not in (False, None)]
     if moved:
         p.error(f"moved under train (run {'; '.join(moved)})")
+    if not a.env:  # what --no-env used to leave, the training-based parts, moved
+        p.error("--no-env leaves nothing to run here: the training and policy benchmarks are "
+                "python -m train.bench training|fidelity|transfer")  # fmt: skip
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, object]] = []
-    if not a.env:
-        return rows
     ref = scripted_turn(2)
     base = None
     rates = steps_per_second(range(1, len(ROWS) + 1), a.steps, a.repeats)

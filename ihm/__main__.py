@@ -235,8 +235,15 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
+    from stability.api import RENAMED_METHODS
+
     from .sim_maps import MapError, check_options, run
 
+    for i, method in enumerate(args.method):  # old names work, and the user is told once
+        if method in RENAMED_METHODS:
+            new = RENAMED_METHODS[method]
+            print(f"{PROG} map: note: method {method!r} is called {new!r} now", file=sys.stderr)
+            args.method[i] = new
     try:
         for method in args.method:
             check_options(args.plane, method, args.directions, args.workers, args.cap, args.frame)

@@ -18,7 +18,7 @@ Each env still gets its action from its own latest observation and the same poli
 the actions are sampled in the same order as SB3's (part A's envs, then part B's, step by
 step), so with a frozen ``VecNormalize`` (or none) the rollout buffer equals SB3's
 ``collect_rollouts`` over the same envs: bit for bit, except the values, which agree to
-float rounding (batched products round differently; ``tests/test_vec.py``). Torch's
+float rounding (batched products round differently; ``tests/train/test_vec.py``). Torch's
 Gaussian sampler fills blocks of 16, so the same draws need each part's action count
 (envs x 12) to be a multiple of 16, as with 16 envs in 2 parts. With a training
 ``VecNormalize`` the running statistics are updated part by part, so part A's

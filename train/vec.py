@@ -9,7 +9,7 @@ per step, and the physics of the chunks runs in parallel.
 
 The result is the same as ``DummyVecEnv`` over the same thunks, step for step
 (same auto-reset, ``terminal_observation`` and seeding semantics: each chunk *is*
-a ``DummyVecEnv``); ``tests/test_four_finger_env.py`` checks it.
+a ``DummyVecEnv``); ``tests/train/test_vec.py`` checks it.
 """
 
 from __future__ import annotations

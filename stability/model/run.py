@@ -26,7 +26,7 @@ HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
 CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS)
 
 
-# Measured by ``python -m stability.bench mip`` (docs/bench/stability.md, docs/bench/mip.csv): over its 12
+# Measured by ``python -m stability.bench mip`` (docs/bench/stability.md): over its 12
 # (case, query) medians SCIP/HiGHS is 1.17 (geometric mean) for no_mdp's one MIP per query
 # and 0.84 for iterative's many small ones; both gave the same answers.
 DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip", "refinement": "scip"}

@@ -165,6 +165,8 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
         (["barrett_box", "--frame", "hand"], "unknown frame"),
         (["barrett_box", "--seat", "0", "0.01", "0.01", "0"], "--seat needs --nonbackdrivable"),
         (["barrett_box", "--method", "gws", "--normal-uncertainty", "2"], "the refinement method"),
+        # the old name of the exact method: a note, then (here) the bad option's error
+        (["barrett_box", "--method", "spatial", "--cap", "0"], "'spatial' is called 'exact'"),
     ):
         q = subprocess.run(
             [sys.executable, "-m", "ihm", "map", *bad, "--no-progress"],

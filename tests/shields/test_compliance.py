@@ -56,8 +56,8 @@ def test_contact_compliance_is_what_mujoco_simulates(
     spring constant is the one the skin's solref/solimp give. The tangential creep
     ``v = R_t c_t / B`` is the converged contact model's (to 2e-5 m/s at PGS tolerance 1e-8);
     the env's PGS stops at ``SOLVER_TOLERANCE`` and leaves a residual in it of up to about
-    1e-4 m/s (median 2e-5 over 12 grasps, beside creeps of 7e-5 median; README,
-    "Throughput"), bounded here at 1.5e-4 m/s (7.5 um over a policy step)."""
+    1e-4 m/s (median 2e-5 over 12 grasps, beside creeps of 7e-5 median; docs/bench/
+    four_finger_env.md), bounded here at 1.5e-4 m/s (7.5 um over a policy step)."""
     env.model.opt.tolerance = tolerance
     try:
         settled(env, 3, steps=6)

@@ -101,6 +101,7 @@ def test_envs_bench_names_the_moved_parts() -> None:
         ("--train", "python -m train.bench training"),
         ("--fidelity", "python -m train.bench fidelity"),
         ("--transfer", "python -m train.bench transfer"),
+        ("--no-env", "python -m train.bench training|fidelity|transfer"),  # nothing left to run
     ):
         p = run("envs.bench", option)
         assert p.returncode == 2 and command in p.stderr, p.stderr
