@@ -71,7 +71,9 @@ was returned. A returned certificate satisfies every condition, ``friction_cone`
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -95,6 +97,8 @@ __all__ = ["EdgeSet", "edge_length"]
 _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
                 "motion_bound", "start_level", "certify", "certify_gap")  # fmt: skip
 TWO_PI = 2.0 * math.pi
+BOX_RETRIES = 2  # tenfold enlargements of the box when it cuts the optimum off
+REFINE_STEP = 2  # levels a needed sector is refined by per round (measured: 2 beats 1, 3)
 
 
 def edge_length(p: int, gamma: float, q: int) -> float:
@@ -150,6 +154,19 @@ class EdgeSet:
                 out.append(j)
         return out
 
+    def refine_at(self, phi: float, depth: int) -> int:
+        """Halve the sectors about direction ``phi`` [rad] ``depth`` times over (down to the
+        finest width); the number of sectors halved."""
+        n = 0
+        for _ in range(depth):
+            todo = [j for j in self.sectors_at(phi) if self.width(j) > self.finest_width() * (1 + 1e-9)]
+            if not todo:
+                break
+            for th in sorted({self.theta[j] for j in todo}):
+                j = next(j for j in range(len(self)) if self.theta[j] == th and self.width(j) > 0)
+                n += int(self.refine(j))
+        return n
+
     def refine(self, j: int) -> bool:
         """Halve sector ``j``: edges of level ``p + 1`` along its edges and bisector; then
         drop redundant edges. False if the sector is already at the finest width."""
@@ -203,7 +220,7 @@ class _Opts:
     start_level: int | None = None  # uniform edges of this level first (default 1; q + 1
     # without refinement)
     certify: bool = True  # try each round's answer as an exact solution (certify)
-    certify_gap: float = 1e-6  # stop when the certified value meets the relaxation's
+    certify_gap: float = 1e-4  # stop when the certified value meets the relaxation's
 
     @classmethod
     def pop(cls, options: dict[str, Any]) -> _Opts:
@@ -321,12 +338,15 @@ class _Relaxation:
                 val = np.r_[val, np.full(len(self.alpha[i]), math.sin(eta))]
                 M.rows[r] = Row(idx.astype(np.int64), val, row.lo, row.hi, row.name)
 
-    def refine(self, pt: ExactPoint, tol: float = 1e-9) -> int:
+    def refine(self, pt: ExactPoint, tol: float = 1e-9, exact: ExactPoint | None = None,
+               depth: int = 1) -> int:  # fmt: skip
         """Halve the sectors the answer ``pt`` needs finer (see the module docstring); the
-        number of sectors halved."""
+        number of sectors halved. With ``exact`` (a certified exact point), also the
+        sectors of its friction on the cone's boundary, ``depth`` levels at once: the
+        relaxation's bound is then tight where the exact optimum's friction lies."""
         g, x = self.grasp, pt.x
         scale = 1.0 + float(np.abs(pt.forces).max(initial=0.0))
-        n = 0
+        wants: list[list[float]] = []
         for i, es in enumerate(self.edges):
             lens = np.array([es.length(s) for s in range(len(es))])
             dirs = np.array([[math.cos(t), math.sin(t)] for t in es.theta])
@@ -340,15 +360,15 @@ class _Relaxation:
                 want.append(mdt)
             if (slides or outside) and np.linalg.norm(ct) > tol * scale:
                 want.append(ct)
-            todo: set[float] = set()
-            for v in want:
-                phi = math.atan2(v[1], v[0]) % TWO_PI
-                for j in es.sectors_at(phi):
-                    if es.width(j) > es.finest_width() * (1 + 1e-9):
-                        todo.add(es.theta[j])
-            for th in sorted(todo):  # by start angle: indices shift as edges are inserted
-                j = next(j for j in range(len(es)) if es.theta[j] == th and es.width(j) > 0)
-                n += int(es.refine(j))
+            wants.append([math.atan2(v[1], v[0]) % TWO_PI for v in want])
+        n = 0
+        for i, es in enumerate(self.edges):
+            for phi in wants[i]:
+                n += es.refine_at(phi, REFINE_STEP)
+            if exact is not None:
+                ct, lim = exact.forces[i, 1:], float(g.mu[i] * exact.forces[i, 0])
+                if lim > 0 and np.linalg.norm(ct) >= (1.0 - 1e-6) * lim:
+                    n += es.refine_at(math.atan2(ct[1], ct[0]) % TWO_PI, depth)
         return n
 
     def cone_excess(self, pt: ExactPoint) -> float:
@@ -391,7 +411,9 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     trace: list[dict[str, Any]] = []
     stats["rounds"] = trace
     cap0 = data.cap
+    full = dataclasses.replace(data)  # the query as asked (the loop tightens data.cap)
     best = None  # the best certified exact solution so far (certify)
+    relaxed: float | None = None  # the relaxation's bound (MaxDisturbance: upper)
     try:
         for _ in range(ro.max_rounds):
             rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats)
@@ -403,7 +425,7 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 if data.direction is not None:
                     stats["capped"] = False
                 return solution(method, grasp, query, False, stats, conditions=conditions)
-            row["value"] = query_value(rel, pt, var, data)
+            row["value"] = relaxed = query_value(rel, pt, var, data)
             if data.direction is not None and row["value"] < data.cap:
                 # no finer level can do better (containment): tighten the cap, and with it
                 # the model's bounds (big-M), to this level's answer
@@ -411,31 +433,45 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
+            cert = None
             if ro.certify:
-                # the bounds the relaxation was built with: the cap may have been tightened
-                cert = certify(grasp, data, rel.prob.bounds, rel.prob, pt.x, var,
-                               ro.normal_uncertainty, ro.motion_bound)  # fmt: skip
+                # the relaxation's bounds (the cap may have been tightened since), the
+                # query's own cap: an exact point beyond them shows that they cut it off
+                cert = certify(grasp, full, rel.prob.bounds, rel.prob, pt.x, var,
+                               ro.normal_uncertainty, ro.motion_bound, row["value"],
+                               ro.certify_gap)  # fmt: skip
                 row["exact"] = None if cert is None else cert[2]
                 if cert is not None and (best is None or _better(cert[2], best[2], data)):
                     best = cert
-                if best is not None and _closed(best[2], row["value"], data, ro.certify_gap):
-                    return _certified(method, grasp, query, stats, best, trace, ro, data, cap0)
-            n = rel.refine(pt) if ro.refine else 0
+                if best is not None and _beyond(best[2], relaxed, data):
+                    raise _BoxCut(best[2], relaxed)
+                if best is not None and _closed(best[2], relaxed, data, ro.certify_gap):
+                    return _answer(method, grasp, query, stats, best, relaxed, ro, data, cap0,
+                                   True)  # fmt: skip
+            n = rel.refine(pt, exact=None if cert is None else cert[1], depth=ro.levels + 1) if ro.refine else 0
             row["refined"] = n
             if n == 0:
                 break
         else:
             stats["reason"] = f"max_rounds {ro.max_rounds} reached before the finest level"
-            return solution(method, grasp, query, None, stats, status="not_converged",
-                            conditions=conditions)  # fmt: skip
+            return _bracket(solution(method, grasp, query, None, stats, status="not_converged",
+                                     conditions=conditions), best, relaxed, data)  # fmt: skip
     except Stop as e:
-        return stopped(method, grasp, query, stats, e)
-    stats["cone_excess"] = rel.cone_excess(pt)
-    stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
+        return _bracket(stopped(method, grasp, query, stats, e), best, relaxed, data)
     stats["mip_rounds"] = len(trace)
+    stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
+    if best is not None:  # the finest level reached, the bracket still open: the exact point
+        return _answer(method, grasp, query, stats, best, relaxed, ro, data, cap0, False)
+    if data.direction is None and data.command_range is None:  # Existence
+        stats["certified"] = False
+        stats["reason"] = ("the relaxation is feasible at the finest level, but no exact "
+                           "solution was found with its contact modes: neither stable "
+                           "(no exact point) nor unstable (no proof)")  # fmt: skip
+        return solution(method, grasp, query, None, stats, status="not_converged",
+                        conditions=conditions)  # fmt: skip
+    # an optimisation query without an exact point: the relaxation's answer, flagged
+    stats["cone_excess"] = rel.cone_excess(pt)
     stats["certified"] = False
-    if best is not None:
-        stats["exact_value"] = best[2]
     value = query_value(rel, pt, var, data)
     if data.direction is not None:
         stats["capped"] = value >= cap0 * (1 - 1e-8)
@@ -445,6 +481,34 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
         stats["at_bound"] = stats.get("at_bound") or bool(
             np.any(sol.commands >= 0.99 * data.command_range[1]) and query.upper is None
         )
+    return _bracket(sol, None, relaxed, data)
+
+
+class _BoxCut(Exception):
+    """An exact point better than the relaxation's bound: the relaxation's box (force and
+    motion bounds from ``bound_factor``) cut the optimum off."""
+
+    def __init__(self, exact: float | None, relaxed: float | None) -> None:
+        super().__init__(f"exact value {exact} beyond the relaxation's bound {relaxed}")
+        self.exact, self.relaxed = exact, relaxed
+
+
+def _beyond(exact: float | None, relaxed: float | None, data: QueryData) -> bool:
+    """The exact value lies beyond the relaxation's bound (by more than round-off)."""
+    if exact is None or relaxed is None:
+        return False
+    tol = 1e-7 * (1.0 + abs(relaxed))
+    return exact > relaxed + tol if data.direction is not None else exact < relaxed - tol
+
+
+def _bracket(sol: Solution, best: tuple | None, relaxed: float | None,
+             data: QueryData) -> Solution:  # fmt: skip
+    """``sol`` with its ``lower``/``upper``: the best exact value and the relaxation's."""
+    exact = None if best is None else best[2]
+    if data.direction is not None:
+        sol.lower, sol.upper = exact, relaxed
+    elif data.command_range is not None:
+        sol.lower, sol.upper = relaxed, exact
     return sol
 
 
@@ -455,21 +519,24 @@ def _better(a: float | None, b: float | None, data: QueryData) -> bool:
 
 
 def _closed(exact: float | None, relaxed: float | None, data: QueryData, gap: float) -> bool:
-    """The certified exact value meets the relaxation's bound within ``gap`` (Existence:
-    any certificate closes)."""
+    """The certified exact value meets the relaxation's bound within ``gap`` relative
+    (Existence: any certificate closes)."""
     if exact is None or relaxed is None:
         return True
+    slack = gap * max(abs(exact), abs(relaxed)) + 1e-12
     if data.direction is not None:  # exact <= optimum <= relaxed
-        return exact >= relaxed * (1.0 - gap) - 1e-12
-    return exact <= relaxed * (1.0 + gap) + 1e-12  # relaxed <= optimum <= exact
+        return exact >= relaxed - slack
+    return exact <= relaxed + slack  # relaxed <= optimum <= exact
 
 
-def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
-               trace: list, ro: _Opts, data: QueryData, cap0: float) -> Solution:  # fmt: skip
-    """The Solution of a certified exact point (module docstring, "Certificates")."""
+def _answer(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
+            relaxed: float | None, ro: _Opts, data: QueryData, cap0: float,
+            closed: bool) -> Solution:  # fmt: skip
+    """The Solution of the best exact point (module docstring, "Certificates"); ``closed``:
+    its value meets the relaxation's bound within ``certify_gap``."""
     ex, pt, value = best
-    stats["certified"] = True
-    stats["mip_rounds"] = len(trace)
+    stats["certified"] = closed
+    stats["mip_rounds"] = len(stats["rounds"])
     stats["cone_excess"] = 0.0
     stats["cone_excess_bound"] = edge_length(ro.levels + 1, ro.gamma, ro.levels) - 1.0
     stats["exact_value"] = value
@@ -479,7 +546,7 @@ def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], bes
     sol = solution(method, grasp, query, True, stats, ex.prob, pt, value, conditions=conditions)
     if data.command_range is not None:
         sol.commands = pt.x[ex.prob.fc]
-    return sol
+    return _bracket(sol, best, relaxed, data)
 
 
 @register(
@@ -492,4 +559,26 @@ def _certified(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], bes
     "of a convex relaxation (infeasible at any level = unstable)",
 )
 def _solve_refinement(grasp: Grasp, query: Any, **options: Any) -> Solution:
-    return _solve(grasp, query, "refinement", **options)
+    # An exact point beyond the relaxation's bound means the model's box (force and motion
+    # bounds, bound_factor times the force scale) cut the optimum off: enlarge it tenfold,
+    # at most BOX_RETRIES times, within the same time limit.
+    t0 = time.perf_counter()
+    limit = options.get("time_limit")
+    factor = float(options.get("bound_factor", 100.0))
+    cuts: list[str] = []
+    for _ in range(BOX_RETRIES + 1):
+        try:
+            sol = _solve(grasp, query, "refinement", **options)
+        except _BoxCut as e:
+            cuts.append(f"bound_factor {factor:g}: {e}")
+            factor *= 10.0
+            options["bound_factor"] = factor
+            if limit is not None:
+                options["time_limit"] = max(0.0, float(limit) - (time.perf_counter() - t0))
+            continue
+        if cuts:
+            sol.stats["box_enlarged"] = cuts
+        return sol
+    return Solution(None, "refinement", grasp, query, status="error",
+                    stats={"message": "the model's box cut the optimum off at every bound "
+                           f"tried: {cuts}", "box_enlarged": cuts})  # fmt: skip

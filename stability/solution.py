@@ -122,6 +122,14 @@ class Solution:
         Hands: actuator forces ``f`` with ``J^T c = R f`` [N or N m].
     commands : (a,) array or None
         OptimalCommands: the optimal actuator commands ``f_c``.
+    lower, upper : float or None
+        Optimisation queries of the methods that bracket their answer (``refinement``,
+        ``exact``): the optimum lies in ``[lower, upper]``. The bound on the feasible side
+        (MaxDisturbance: ``lower``; OptimalCommands: ``upper``) is the value of an exact
+        solution (the returned one when ``value`` equals it, which then passes
+        :meth:`residuals`); the other is proven by a relaxation (or SCIP's dual bound).
+        None where no such bound is known. ``stats["certified"]`` is True when the bracket
+        is closed to the method's tolerance. A time-out keeps the bracket reached so far.
     hand_reference : (l,) array or None
         Hands: the joint motion ``q_ref`` where the nonbackdrivable actuators lock
         (``R^T (q - q_ref) >= 0``); None means 0 (commands and disturbance applied at once).
@@ -146,6 +154,8 @@ class Solution:
     hand_reference: NDArray[np.float64] | None = None
     conditions: tuple[str, ...] | None = None
     commands: NDArray[np.float64] | None = None
+    lower: float | None = None
+    upper: float | None = None
 
     @property
     def wrench(self) -> NDArray[np.float64]:

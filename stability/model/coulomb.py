@@ -13,6 +13,7 @@ equilibrium and objective come from :func:`stability.model.query.add_query`.
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any
 
@@ -109,10 +110,25 @@ class CoulombModel:
             m.addCons(t1 * d1 + t2 * d2 + mu * cn * s <= 0.0, name=f"dissipation{i}")
         return m, x
 
-    def violations(self, xv: NDArray[np.float64]) -> dict[str, float]:
+    def free_motion(self, model: Any) -> None:
+        """Lift the box on the motions (``r``, ``q``, ``d_t``, ``s``, ``v``) of ``model`` (this
+        model or an LP with its variables): a point of the exact problem may lie beyond it."""
+        prob = self.prob
+        for j in [*prob.r, *self.dt.reshape(-1), *([] if prob.q is None else prob.q)]:
+            model.lb[int(j)], model.ub[int(j)] = -INF, INF
+        for j in [*self.slide, *([] if prob.v is None else prob.v)]:
+            model.ub[int(j)] = INF
+
+    def violations(self, xv: NDArray[np.float64], box: bool = True) -> dict[str, float]:
         """The linear model's exact-condition violations plus ``cone`` (``|c_t| - mu c_n``)
-        and ``dissipation`` (``c_t . d_t + mu c_n |d_t|`` with the true ``|d_t|``)."""
-        out = self.prob.model.violations(xv)
+        and ``dissipation`` (``c_t . d_t + mu c_n |d_t|`` with the true ``|d_t|``);
+        ``box=False`` ignores the box on the motions (:meth:`free_motion`)."""
+        model = self.prob.model
+        if not box:
+            model = copy.copy(model)
+            model.lb, model.ub = list(model.lb), list(model.ub)
+            self.free_motion(model)
+        out = model.violations(xv)
         c = xv[self.prob.c]
         dt = xv[self.dt]
         ctn = np.linalg.norm(c[:, 1:], axis=1)
@@ -179,14 +195,16 @@ def exact_point(
 def certify(
     grasp: Grasp, data: QueryData, bounds: ExactBounds, relaxed: ExactProblem,
     x: NDArray[np.float64], var: int | None, eta: float, motion_bound: float,
+    target: float | None = None, gap: float = 0.0, steps: int = 8,
 ) -> tuple[CoulombModel, ExactPoint, float | None] | None:  # fmt: skip
     """An exact solution near a relaxation's answer ``x`` (of ``relaxed``'s model, ``var``
-    its query variable): each contact keeps the relaxation's mode (open; sliding along its
-    motion ``d_t``; on the cone's boundary; sticking), and :func:`mode_lp` solves the exact
-    problem with those modes, optimising the query. Returns the exact model, its point and
-    query value, or None when those modes admit no exact solution. A certificate: Existence
-    is then stable; a MaxDisturbance's value is a lower bound on the exact optimum (the
-    relaxation's an upper one); an OptimalCommands' an upper bound."""
+    its query variable): each contact keeps the relaxation's mode (open; sliding; sticking)
+    and the exact problem with those modes is solved for the query's optimum over the slide
+    directions (:func:`slide_search`, at most ``steps`` LP pairs, stopping early once the
+    value is within ``gap`` of ``target``, the relaxation's bound). Returns the exact model,
+    its point and query value, or None when no exact solution with those modes was found. A
+    certificate: Existence is then stable; a MaxDisturbance's value is a lower bound on the
+    exact optimum (the relaxation's an upper one); an OptimalCommands' an upper bound."""
     ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
     qvar = add_query(ex.prob, data)
     prob = ex.prob
@@ -202,11 +220,207 @@ def certify(
     y[ex.slide] = np.linalg.norm(dt, axis=1)
     if qvar is not None and qvar >= 0 and var is not None and var >= 0:
         y[qvar] = x[var]
-    got = exact_point(ex, y, ("relaxation", "force"))
+    got = slide_search(ex, y, target, gap, steps)
     if got is None:
         return None
-    pt = prob.point(got[0])
+    pt = prob.point(got)
     return ex, pt, query_value(ex, pt, qvar, data)
+
+
+def slide_search(
+    ex: CoulombModel, x: NDArray[np.float64], target: float | None = None, gap: float = 0.0,
+    steps: int = 8,
+) -> NDArray[np.float64] | None:  # fmt: skip
+    """The best exact point with ``x``'s contact modes, over the slide directions.
+
+    Modes from ``x`` (binaries fixed): a contact without normal force is open (``c = 0``),
+    one whose tangential motion ``d_t`` is nonzero slides at angle ``phi_i`` (``d_t =
+    sigma_i u(phi_i)``, ``c_t = -mu c_n u(phi_i)``, ``sigma_i >= 0``), the others stick
+    (``d_t = 0``, friction in :func:`inscribed_friction`'s polygon). With the angles fixed
+    that is an LP whose points satisfy every exact condition (:func:`_modes_lp`). The
+    angles start at ``x``'s slide directions and move by sequential linear programming: the
+    LP linearised in ``delta_i`` about the last exact point (``c_t = -mu (c_n u +
+    c_n^0 delta u_perp)``, ``d_t = sigma u + sigma^0 delta u_perp``) within a trust radius
+    ``|delta| <= rho``, then the exact LP at ``phi + delta``, accepted when its objective
+    does not get worse (else ``rho`` shrinks by 4). The least-motion point of the best LP
+    (:meth:`ExactProblem.tidy`) is returned, checked against the exact conditions within
+    ``1e-7 (1 + B)``; None if none was found."""
+    prob, g = ex.prob, ex.grasp
+    M = prob.model
+    c, dt = x[prob.c], x[ex.dt]
+    dscale = 1e-7 * (1.0 + float(np.abs(dt).max(initial=0.0)))
+    fscale = 1e-7 * (1.0 + float(np.abs(c).max(initial=0.0)))
+    modes: list[tuple[str, float]] = []
+    for i in range(g.m):
+        nt, nd = float(np.linalg.norm(c[i, 1:])), float(np.linalg.norm(dt[i]))
+        if c[i, 0] <= fscale:
+            modes.append(("open", math.atan2(dt[i, 1], dt[i, 0]) if nd > dscale else math.nan))
+        elif nd > dscale:
+            modes.append(("slide", math.atan2(dt[i, 1], dt[i, 0])))
+        else:
+            modes.append(("stick", math.atan2(c[i, 2], c[i, 1]) if nt > fscale else 0.0))
+    sliding = [i for i, (mode, _) in enumerate(modes) if mode == "slide"]
+    phi = {i: modes[i][1] for i in sliding}
+    has_obj = bool(np.any(M.objective))
+    sign = 1.0 if M.maximize else -1.0
+    tol = 1e-7 * (1.0 + ex.prob.bounds.force)
+    feas = 1e-9 * (1.0 + ex.prob.bounds.force)  # misalignment [N] taken as none
+
+    def exact_lp(angles: dict[int, float]) -> tuple[Any, NDArray[np.float64], float, float] | None:
+        """(LP, point, objective (larger is better), misalignment) at ``angles``."""
+        lp = _modes_lp(ex, x, modes, angles, elastic=ELASTIC_PENALTY)
+        res = mip_solve(lp, backend="highs", polish=False)
+        if res.status != "optimal" or res.x is None:
+            return None
+        mis = float(np.sum(res.x[lp.elastic])) if lp.elastic else 0.0
+        val = sign * M.objective_value(res.x[: M.n_vars]) if has_obj else 0.0
+        return lp, res.x, val, mis
+
+    def merit(got: tuple) -> float:
+        return got[2] - ELASTIC_PENALTY * got[3]
+
+    def done(got: tuple | None) -> bool:
+        if got is None or got[3] > feas:
+            return False
+        if target is None or not has_obj:
+            return True
+        return got[2] >= sign * target - gap * (1.0 + abs(target)) - 1e-12
+
+    cur = exact_lp(phi)
+    if cur is None:
+        return None
+    best = cur if cur[3] <= feas else None
+    rho = 0.05
+    for _ in range(steps if sliding else 0):
+        if done(best):
+            break
+        ref = cur[1]
+        lin = {i: (float(ref[prob.c[i, 0]]), float(np.linalg.norm(ref[ex.dt[i]]))) for i in sliding}
+        lp = _modes_lp(ex, x, modes, phi, lin, rho)
+        res = mip_solve(lp, backend="highs", polish=False)
+        if res.status != "optimal" or res.x is None:
+            rho /= 4.0
+            if rho < 1e-9:
+                break
+            continue
+        delta = {i: float(res.x[j]) for i, j in lp.deltas.items()}
+        trial = {i: phi[i] + delta[i] for i in sliding}
+        got = exact_lp(trial)
+        if got is not None and merit(got) >= merit(cur) - 1e-12 * (1.0 + abs(merit(cur))):
+            cur, phi = got, trial
+            if got[3] <= feas and (best is None or got[2] >= best[2]):
+                best = got
+            rho = min(4.0 * rho, 0.5)
+        else:
+            rho /= 4.0
+        if rho < 1e-9 or max(abs(v) for v in delta.values()) < 1e-12:
+            break
+    if best is None:
+        return None
+    lp, xb, _, _ = best
+    for j in lp.elastic:  # the misalignment, below feas, is none
+        lp.lb[int(j)] = lp.ub[int(j)] = 0.0
+    y = ex.prob.tidy(xb, lp=lp)
+    y = (xb if y is None else y)[: M.n_vars]
+    if max(ex.violations(y, box=False).values()) > tol:
+        y = xb[: M.n_vars]
+        if max(ex.violations(y, box=False).values()) > tol:
+            return None
+    return y
+
+
+ELASTIC_PENALTY = 1e4  # per newton of misaligned friction, in the query's objective units
+
+
+def _modes_lp(
+    ex: CoulombModel, x: NDArray[np.float64], modes: list[tuple[str, float]],
+    angles: dict[int, float], lin: dict[int, tuple[float, float]] | None = None,
+    rho: float = 0.0, elastic: float | None = None,
+) -> Any:  # fmt: skip
+    """The LP of :func:`slide_search`: binaries fixed at ``x``, the contacts in ``modes``
+    (``"open"``, ``"stick"`` with a friction hint angle, ``"slide"``) with slide angles
+    ``angles``; with ``lin`` (per sliding contact ``(c_n^0, sigma^0)``) linearised in a
+    variable ``delta_i in [-rho, rho]`` per sliding contact (``lp.deltas``: contact ->
+    index)."""
+    prob, g = ex.prob, ex.grasp
+    lp = prob.model.fixed(x)
+    lp.deltas, lp.elastic = {}, []
+    if elastic is not None and not np.any(lp.objective):
+        lp.maximize = False  # Existence: the least misalignment
+    # the motions are free here (not in the relaxation's box): an exact point beyond the box
+    # shows that the box cut the relaxation's optimum off (stability.refinement enlarges it)
+    ex.free_motion(lp)
+
+    def fix(js: Any) -> None:
+        for j in js:
+            lp.lb[int(j)] = lp.ub[int(j)] = 0.0
+
+    for i, (mode, hint) in enumerate(modes):
+        ci, ti = int(prob.c[i, 0]), [int(j) for j in prob.c[i, 1:]]
+        di = [int(j) for j in ex.dt[i]]
+        mu = float(g.mu[i])
+        if mode == "open":
+            fix(prob.c[i])
+            if ex.eta > 0.0:  # the slide enters the spring law: keep its direction
+                if math.isnan(hint):
+                    fix((*di, ex.slide[i]))
+                else:
+                    u = (math.cos(hint), math.sin(hint))
+                    sig = lp.add_var(0.0, INF, "C", f"sigma{i}")
+                    for t in range(2):
+                        lp.add_row([di[t], sig], [1.0, -u[t]], 0.0, 0.0)
+                    lp.add_row([int(ex.slide[i]), sig], [1.0, -1.0], 0.0, 0.0)
+        elif mode == "stick":
+            fix((*di, ex.slide[i]))
+            inscribed_friction(lp, ti, ci, mu, hint)
+        else:
+            th = angles[i]
+            u = (math.cos(th), math.sin(th))
+            up = (-math.sin(th), math.cos(th))
+            sig = lp.add_var(0.0, INF, "C", f"sigma{i}")
+            lp.add_row([int(ex.slide[i]), sig], [1.0, -1.0], 0.0, 0.0)
+            if lin is None and elastic is not None:
+                # d_t = sigma u, c_t = -mu c_n u + (e+ - e-) u_perp: misaligned friction
+                # |e+ - e-| [N] is penalised (elastic), so the LP always has a point
+                ep, em = lp.add_var(0.0, INF, "C", f"e+{i}"), lp.add_var(0.0, INF, "C", f"e-{i}")
+                lp.elastic += [ep, em]
+                pen = -elastic if lp.maximize else elastic
+                lp.objective[ep] = lp.objective[em] = pen
+                for t in range(2):
+                    lp.add_row([di[t], sig], [1.0, -u[t]], 0.0, 0.0)
+                    lp.add_row([ti[t], ci, ep, em], [1.0, mu * u[t], -up[t], up[t]], 0.0, 0.0)
+            elif lin is None:
+                for t in range(2):  # d_t = sigma u, c_t = -mu c_n u
+                    lp.add_row([di[t], sig], [1.0, -u[t]], 0.0, 0.0)
+                    lp.add_row([ti[t], ci], [1.0, mu * u[t]], 0.0, 0.0)
+            else:
+                cn0, sig0 = lin[i]
+                dl = lp.add_var(-rho, rho, "C", f"delta{i}")
+                lp.deltas[i] = dl
+                for t in range(2):
+                    lp.add_row([di[t], sig, dl], [1.0, -u[t], -sig0 * up[t]], 0.0, 0.0)
+                    lp.add_row([ti[t], ci, dl], [1.0, mu * u[t], mu * cn0 * up[t]], 0.0, 0.0)
+    return lp
+
+
+STICK_VERTICES = 32  # the inscribed polygon's uniform vertices (a sticking contact)
+STICK_FINE = (8, 2.0 * math.pi / 2048)  # and 2 x 8 more this far apart about the hint [rad]
+
+
+def inscribed_friction(lp: Any, ti: list[int], ci: int, mu: float, phi: float) -> None:
+    """``c_t`` (variables ``ti``) in the polygon inscribed in the cone ``|c_t| <= mu c_n``
+    (``ci``) with :data:`STICK_VERTICES` uniform vertices and :data:`STICK_FINE` more about
+    direction ``phi`` [rad]: ``c_t = sum_k lambda_k v_k``, ``sum lambda <= mu c_n``,
+    ``lambda >= 0`` with ``v_k`` unit vectors. Every such ``c_t`` lies in the exact cone; the
+    fine vertices keep a friction force near ``phi`` (the relaxation's) within
+    ``1 - cos(pi / 2048)`` (1e-6) of the boundary."""
+    n, step = STICK_FINE
+    th = np.r_[2.0 * math.pi * np.arange(STICK_VERTICES) / STICK_VERTICES,
+               phi + step * np.arange(-n, n + 1)]  # fmt: skip
+    lam = lp.add_vars(th.size, 0.0, INF, "C", "lambda")
+    for t, f in enumerate((np.cos, np.sin)):
+        lp.add_row([ti[t], *lam], [1.0, *(-f(th))], 0.0, 0.0)
+    lp.add_row([*lam, ci], [1.0] * th.size + [-mu], -INF, 0.0)
 
 
 def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any, Any] | None:
@@ -249,6 +463,10 @@ def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any,
             slide(i, dt[i] / nd)
             for t in range(2):  # c_t = -mu c_n u
                 lp.add_row([ti[t], ci], [1.0, mu * float(dt[i, t] / nd)], 0.0, 0.0)
+        elif source == "relaxation":  # sticks, friction anywhere in an inscribed polygon
+            fix((*ex.dt[i], ex.slide[i]))
+            phi = math.atan2(c[i, 2], c[i, 1]) if nt > fscale else 0.0
+            inscribed_friction(lp, ti, ci, mu, phi)
         elif nt >= (1.0 - 1e-4) * mu * cn:  # on the boundary: slides along u (or is about to)
             moves = nd > 1e3 * dscale
             u = dt[i] / nd if source == "motion" and moves else -c[i, 1:] / nt
