@@ -97,6 +97,7 @@ __all__ = ["EdgeSet", "edge_length"]
 _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
                 "motion_bound", "start_level", "certify", "certify_gap")  # fmt: skip
 TWO_PI = 2.0 * math.pi
+WINDOW_SLACK = 1e-7  # relative widening of the value window a round searches
 BOX_RETRIES = 2  # tenfold enlargements of the box when it cuts the optimum off
 REFINE_STEP = 2  # levels a needed sector is refined by per round (measured: 2 beats 1, 3)
 
@@ -382,13 +383,25 @@ class _Relaxation:
 
 def _round(
     grasp: Grasp, data: QueryData, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
-    opts: MipOptions, stats: dict[str, Any],
+    opts: MipOptions, stats: dict[str, Any], window: tuple[float | None, float | None] = (None, None),
 ) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
-    ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands)."""
+    ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands). ``window``: bounds
+    ``(lo, hi)`` on the query's value known to hold for this relaxation's optimum (the best
+    exact value on one side, the previous round's bound on the other): the search skips
+    every node outside them."""
     rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
     var = add_query(rel.prob, data)
-    rel.prob.model.many_small = True
+    M = rel.prob.model
+    lo, hi = window
+    if var is not None and (lo is not None or hi is not None):
+        lo = -INF if lo is None else lo - WINDOW_SLACK * (1.0 + abs(lo))
+        hi = INF if hi is None else hi + WINDOW_SLACK * (1.0 + abs(hi))
+        if var >= 0:
+            M.lb[var], M.ub[var] = max(M.lb[var], lo), min(M.ub[var], hi)
+        else:  # the weighted commands
+            M.add_row(rel.prob.fc, data.weights, lo, hi, "window")
+    M.many_small = True
     pt = run(rel.prob, opts, stats)
     return rel, pt, var
 
@@ -416,9 +429,13 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     relaxed: float | None = None  # the relaxation's bound (MaxDisturbance: upper)
     try:
         for _ in range(ro.max_rounds):
-            rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats)
+            exact = None if best is None else best[2]
+            window = (exact, None) if data.direction is not None else (relaxed, exact)
+            rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats, window)
             row: dict[str, Any] = {"edges": [len(e) for e in edges], "feasible": pt is not None}
             trace.append(row)
+            if pt is None and best is not None:  # nothing in the window: the box cut it off
+                raise _BoxCut(best[2], None)
             if pt is None:
                 stats["reason"] = (f"infeasible with {max(len(e) for e in edges)} edges per "
                                    "contact: no equilibrium at any finer level either")  # fmt: skip

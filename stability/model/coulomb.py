@@ -315,6 +315,25 @@ def slide_search(
             rho /= 4.0
         if rho < 1e-9 or max(abs(v) for v in delta.values()) < 1e-12:
             break
+    # restoration: Newton steps onto the exact modes' manifold (least angle change that
+    # aligns friction to first order), from the best point in merit; quadratic convergence
+    start = cur
+    for _ in range(RESTORE_STEPS if sliding else 0):
+        if start[3] <= feas:
+            break
+        ref = start[1]
+        lin = {i: (float(ref[prob.c[i, 0]]), float(np.linalg.norm(ref[ex.dt[i]]))) for i in sliding}
+        lp = _modes_lp(ex, x, modes, phi, lin, 0.5, restore=True)
+        res = mip_solve(lp, backend="highs", polish=False)
+        if res.status != "optimal" or res.x is None:
+            break
+        trial = {i: phi[i] + float(res.x[j]) for i, j in lp.deltas.items()}
+        got = exact_lp(trial)
+        if got is None or got[3] >= start[3]:
+            break
+        start, phi = got, trial
+        if got[3] <= feas and (best is None or got[2] >= best[2]):
+            best = got
     if best is None:
         return None
     lp, xb, _, _ = best
@@ -329,13 +348,14 @@ def slide_search(
     return y
 
 
+RESTORE_STEPS = 4
 ELASTIC_PENALTY = 1e4  # per newton of misaligned friction, in the query's objective units
 
 
 def _modes_lp(
     ex: CoulombModel, x: NDArray[np.float64], modes: list[tuple[str, float]],
     angles: dict[int, float], lin: dict[int, tuple[float, float]] | None = None,
-    rho: float = 0.0, elastic: float | None = None,
+    rho: float = 0.0, elastic: float | None = None, restore: bool = False,
 ) -> Any:  # fmt: skip
     """The LP of :func:`slide_search`: binaries fixed at ``x``, the contacts in ``modes``
     (``"open"``, ``"stick"`` with a friction hint angle, ``"slide"``) with slide angles
@@ -397,9 +417,17 @@ def _modes_lp(
                 cn0, sig0 = lin[i]
                 dl = lp.add_var(-rho, rho, "C", f"delta{i}")
                 lp.deltas[i] = dl
+                if restore:  # objective: sum |delta| (set below)
+                    ab = lp.add_var(0.0, INF, "C", f"|delta{i}|")
+                    lp.add_row([ab, dl], [1.0, -1.0], 0.0, INF)
+                    lp.add_row([ab, dl], [1.0, 1.0], 0.0, INF)
+                    lp.restore_terms = [*getattr(lp, "restore_terms", []), ab]
                 for t in range(2):
                     lp.add_row([di[t], sig, dl], [1.0, -u[t], -sig0 * up[t]], 0.0, 0.0)
                     lp.add_row([ti[t], ci, dl], [1.0, mu * u[t], mu * cn0 * up[t]], 0.0, 0.0)
+    if restore:
+        terms = getattr(lp, "restore_terms", [])
+        lp.set_objective(terms, np.ones(len(terms)))
     return lp
 
 
