@@ -33,6 +33,12 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--repeats", type=int, default=None,
                     help="repeats per point (default: planar 15, mip 7)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--baseline", default=None,
+                    help="grasps: also run this git revision's code (a worktree), side by "
+                    "side")  # fmt: skip
+    ap.add_argument("--backends", default=None,
+                    help="grasps: more MIP backends for refinement, comma-separated "
+                    "(e.g. gurobi)")  # fmt: skip
     return ap
 
 

@@ -17,11 +17,25 @@ random unit directions (cap 100), and optimal commands (minimise the largest) fo
 counts at the limit in the medians and is reported). Writes ``grasps.csv`` (one row per
 solve) and ``grasps.png`` (median time per grasp and task, log scale, with the thesis'
 medians), and prints the table beside the thesis'.
+
+Variants, in the same run: the default (``refinement`` with SCIP), ``--backends`` (e.g.
+``gurobi``: the same method on the thesis' solver, where installed), and ``--baseline REV``:
+the same benchmark run by the code of git revision ``REV`` (a detached worktree under the
+system's temporary folder, its own process, side by side with ours: one process per core).
+Rows carry the bracket ``lower``/``upper`` and ``certified`` (closed to 1e-4 relative).
+``grasps_summary.csv`` has per variant, contact count and task the median and worst time,
+the time-outs and the share of closed brackets; ``grasps.png`` charts the medians against
+the contact count (log scale) with the thesis' Gurobi figures as markers.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import os
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -95,9 +109,9 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
 
 def bench_grasps(
     directions: int = 10, wrenches: int = 10, time_limit: float = 60.0, seed: int = SEED,
-    only: str | None = None, progress: bool = True,
+    only: str | None = None, progress: bool = True, backend: str | None = None,
 ) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per solve: grasp, contacts, task, time_s, status, answer."""
+    """One row per solve: grasp, contacts, task, time_s, status, answer, bracket."""
     from tqdm import tqdm
 
     rows: list[dict[str, Any]] = []
@@ -113,11 +127,13 @@ def bench_grasps(
                   for _ in range(wrenches)]  # fmt: skip
         for task, q in tasks:
             t0 = time.perf_counter()
-            sol = solve(g, q, method="refinement", time_limit=time_limit)
+            opts = {} if backend is None else {"backend": backend}
+            sol = solve(g, q, method="refinement", time_limit=time_limit, **opts)
             t = time.perf_counter() - t0
             ans = sol.value if task != "check" else sol.stable
-            rows.append({"grasp": label, "contacts": g.m, "task": task, "time_s": round(t, 4),
-                         "status": sol.status, "answer": ans,
+            rows.append({"variant": backend or "default", "grasp": label, "contacts": g.m,
+                         "task": task, "time_s": round(t, 4), "status": sol.status,
+                         "answer": ans, "lower": sol.lower, "upper": sol.upper,
                          "rounds": len(sol.stats.get("rounds", [])),
                          "certified": sol.stats.get("certified")})  # fmt: skip
             bar.update(1)
@@ -182,15 +198,131 @@ def write_grasps(rows: list[dict[str, Any]], out: Path) -> tuple[Path, Path]:
     ax.set_title("refinement on twelve grasps: medians per task (this 2-core machine)")
     ax.legend(fontsize=8, ncol=2)
     ax.grid(True, which="both", axis="y", alpha=0.3)
-    png = save(fig, out / "grasps.png", dpi=120)
+    png = save(fig, out / "grasps_per_grasp.png", dpi=120)
     return path, png
+
+
+def baseline(rev: str, args: argparse.Namespace) -> tuple[subprocess.Popen, Path, Path]:
+    """Start this benchmark at git revision ``rev`` in a detached worktree (its own
+    process); returns the process, its output folder and the worktree."""
+    root = Path(__file__).resolve().parents[2]
+    sha = subprocess.run(["git", "rev-parse", "--short", rev], cwd=root, check=True,
+                         capture_output=True, text=True).stdout.strip()  # fmt: skip
+    tree = Path(tempfile.gettempdir()) / f"ihm-baseline-{sha}"
+    if not tree.exists():
+        subprocess.run(["git", "worktree", "add", "--detach", str(tree), sha], cwd=root,
+                       check=True, capture_output=True)  # fmt: skip
+    out = Path(tempfile.mkdtemp(prefix=f"ihm-baseline-{sha}-"))
+    cmd = [sys.executable, "-m", "stability.bench", "grasps", "--directions",
+           str(args.directions), "--wrenches", str(args.wrenches), "--time-limit",
+           str(args.time_limit or 60.0), "--out", str(out)]  # fmt: skip
+    if args.only:
+        cmd += ["--only", args.only]
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    proc = subprocess.Popen(cmd, cwd=tree, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)  # fmt: skip
+    return proc, out, tree
+
+
+def read_baseline(out: Path, rev: str) -> list[dict[str, Any]]:
+    """The baseline's rows, as ours (the old CSV has no bracket columns)."""
+    rows = []
+    with open(out / "grasps.csv", newline="") as fh:
+        for r in csv.DictReader(fh):
+            rows.append({"variant": f"landed {rev}", "grasp": r["grasp"],
+                         "contacts": int(r["contacts"]), "task": r["task"],
+                         "time_s": float(r["time_s"]), "status": r["status"],
+                         "answer": r["answer"], "lower": None, "upper": None,
+                         "rounds": r.get("rounds"), "certified": r.get("certified")})  # fmt: skip
+    return rows
+
+
+def by_contacts(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any]]:
+    """Per variant, contact count and task: median and worst time (time-outs and errors
+    at the limit), time-outs, answered share and closed-bracket share."""
+    out = []
+    for variant in dict.fromkeys(r["variant"] for r in rows):
+        for m in sorted({r["contacts"] for r in rows}):
+            for task in ("check", "max_disturbance", "optimal_commands"):
+                rs = [r for r in rows if r["variant"] == variant and r["contacts"] == m
+                      and r["task"] == task]  # fmt: skip
+                if not rs:
+                    continue
+                ts = [r["time_s"] if r["status"] == "solved" else max(r["time_s"], time_limit)
+                      for r in rs]  # fmt: skip
+                # closed: a certified bracket; a check: any answer (a point or a proof)
+                closed = [str(r["certified"]) == "True" or (task == "check" and r["status"]
+                          == "solved" and r["variant"] == "default") for r in rs]  # fmt: skip
+                out.append({"variant": variant, "contacts": m, "task": task, "n": len(rs),
+                            "median_s": float(np.median(ts)), "worst_s": float(np.max(ts)),
+                            "timeouts": sum(r["status"] == "timeout" for r in rs),
+                            "solved": sum(r["status"] == "solved" for r in rs),
+                            "closed": sum(closed)})  # fmt: skip
+    return out
+
+
+def print_by_contacts(summ: list[dict[str, Any]]) -> None:
+    thesis = {}
+    for label, (m, c, d, o) in THESIS.items():
+        for task, v in (("check", c), ("max_disturbance", d), ("optimal_commands", o)):
+            thesis.setdefault((m, task), []).append(v)
+    print(f"{'variant':>16} {'m':>2} {'task':>17} | {'median s':>9} {'worst s':>8} | "
+          f"{'timeouts':>8} {'closed':>7} | thesis (Gurobi) s")  # fmt: skip
+    for r in summ:
+        th = thesis.get((r["contacts"], r["task"]), [])
+        rng = f"{min(th):.3g}-{max(th):.3g}" if th else "-"
+        print(f"{r['variant']:>16} {r['contacts']:>2} {r['task']:>17} | {r['median_s']:9.3f} "
+              f"{r['worst_s']:8.2f} | {r['timeouts']:>3}/{r['n']:<4} {r['closed']:>3}/{r['n']:<3} "
+              f"| {rng}")  # fmt: skip
+
+
+def chart(summ: list[dict[str, Any]], path: Path) -> Path:
+    """Median time per query against the contact count, one panel per task, log scale."""
+    plt = pyplot()
+    tasks = [("check", "stability check", 1), ("max_disturbance", "max disturbance", 2),
+             ("optimal_commands", "optimal commands", 3)]  # fmt: skip
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4.2), sharey=True)
+    for ax, (task, name, k) in zip(axes, tasks, strict=True):
+        for j, variant in enumerate(dict.fromkeys(r["variant"] for r in summ)):
+            rs = [r for r in summ if r["variant"] == variant and r["task"] == task]
+            ax.plot([r["contacts"] for r in rs], [r["median_s"] for r in rs], "o-",
+                    color=f"C{j}", label=f"{variant} (median)")  # fmt: skip
+            ax.plot([r["contacts"] for r in rs], [r["worst_s"] for r in rs], "v:",
+                    color=f"C{j}", alpha=0.6, label=f"{variant} (worst)")  # fmt: skip
+        th = [(m, v[k]) for v in THESIS.values() for m in [v[0]]]
+        ax.scatter([m for m, _ in th], [v for _, v in th], marker="_", s=200, color="k",
+                   zorder=3, label="thesis (Gurobi, desktop), per grasp")  # fmt: skip
+        ax.set_yscale("log")
+        ax.set_xlabel("contacts")
+        ax.set_title(name)
+        ax.set_xticks([3, 4, 5, 6])
+        ax.grid(True, which="both", axis="y", alpha=0.3)
+    axes[0].set_ylabel("time per query [s] (time-outs at the limit)")
+    axes[2].legend(fontsize=7)
+    return save(fig, path, dpi=120)
 
 
 def cli(args: argparse.Namespace) -> None:
     """``python -m stability.bench grasps``: options ``--directions``, ``--wrenches``,
-    ``--time-limit`` (default 60 s), ``--only``, ``--out``."""
-    rows = bench_grasps(args.directions, args.wrenches, args.time_limit or 60.0,
-                        only=args.only)  # fmt: skip
-    print_grasps(summary(rows))
-    csv_path, png = write_grasps(rows, Path(args.out))
-    print(f"wrote {csv_path} and {png}")
+    ``--time-limit`` (default 60 s), ``--only``, ``--out``, ``--baseline REV``,
+    ``--backends`` (comma-separated, beside the default)."""
+    limit = args.time_limit or 60.0
+    base = None
+    if getattr(args, "baseline", None):
+        base = baseline(args.baseline, args)
+    rows = bench_grasps(args.directions, args.wrenches, limit, only=args.only)
+    for b in [b for b in (getattr(args, "backends", None) or "").split(",") if b]:
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b)
+    if base is not None:
+        proc, out, _ = base
+        proc.wait()
+        rows += read_baseline(out, args.baseline)
+    mine = [r for r in rows if r["variant"] == "default"]
+    print_grasps(summary(mine))
+    summ = by_contacts(rows, limit)
+    print_by_contacts(summ)
+    csv_path, _ = write_grasps(mine, Path(args.out))
+    write_csv(Path(args.out) / "grasps.csv", rows)
+    write_csv(Path(args.out) / "grasps_summary.csv", summ)
+    png = chart(summ, Path(args.out) / "grasps.png")
+    print(f"wrote {csv_path}, grasps_summary.csv and {png}")
