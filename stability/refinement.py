@@ -160,7 +160,8 @@ class EdgeSet:
         finest width); the number of sectors halved."""
         n = 0
         for _ in range(depth):
-            todo = [j for j in self.sectors_at(phi) if self.width(j) > self.finest_width() * (1 + 1e-9)]
+            fine = self.finest_width() * (1 + 1e-9)
+            todo = [j for j in self.sectors_at(phi) if self.width(j) > fine]
             if not todo:
                 break
             for th in sorted({self.theta[j] for j in todo}):
@@ -383,7 +384,8 @@ class _Relaxation:
 
 def _round(
     grasp: Grasp, data: QueryData, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
-    opts: MipOptions, stats: dict[str, Any], window: tuple[float | None, float | None] = (None, None),
+    opts: MipOptions, stats: dict[str, Any],
+    window: tuple[float | None, float | None] = (None, None),
 ) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
     ``s`` (MaxDisturbance) or of the cost variable (OptimalCommands). ``window``: bounds
@@ -465,7 +467,9 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 if best is not None and _closed(best[2], relaxed, data, ro.certify_gap):
                     return _answer(method, grasp, query, stats, best, relaxed, ro, data, cap0,
                                    True)  # fmt: skip
-            n = rel.refine(pt, exact=None if cert is None else cert[1], depth=ro.levels + 1) if ro.refine else 0
+            n = 0
+            if ro.refine:
+                n = rel.refine(pt, exact=None if cert is None else cert[1], depth=ro.levels + 1)
             row["refined"] = n
             if n == 0:
                 break

@@ -263,7 +263,7 @@ def by_contacts(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str,
 
 def print_by_contacts(summ: list[dict[str, Any]]) -> None:
     thesis = {}
-    for label, (m, c, d, o) in THESIS.items():
+    for m, c, d, o in THESIS.values():
         for task, v in (("check", c), ("max_disturbance", d), ("optimal_commands", o)):
             thesis.setdefault((m, task), []).append(v)
     print(f"{'variant':>16} {'m':>2} {'task':>17} | {'median s':>9} {'worst s':>8} | "
