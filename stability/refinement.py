@@ -97,6 +97,7 @@ __all__ = ["EdgeSet", "edge_length"]
 _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
                 "motion_bound", "start_level", "certify", "certify_gap")  # fmt: skip
 TWO_PI = 2.0 * math.pi
+ROUND_GAP = 0.25  # a round's MIP stops within this fraction of certify_gap (relative)
 WINDOW_SLACK = 1e-7  # relative widening of the value window a round searches
 BOX_RETRIES = 2  # tenfold enlargements of the box when it cuts the optimum off
 REFINE_STEP = 2  # levels a needed sector is refined by per round (measured: 2 beats 1, 3)
@@ -404,6 +405,7 @@ def _round(
         else:  # the weighted commands
             M.add_row(rel.prob.fc, data.weights, lo, hi, "window")
     M.many_small = True
+    M.gap = ROUND_GAP * ro.certify_gap
     pt = run(rel.prob, opts, stats)
     return rel, pt, var
 
@@ -444,11 +446,14 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 if data.direction is not None:
                     stats["capped"] = False
                 return solution(method, grasp, query, False, stats, conditions=conditions)
-            row["value"] = relaxed = query_value(rel, pt, var, data)
-            if data.direction is not None and row["value"] < data.cap:
+            row["value"] = query_value(rel, pt, var, data)
+            # the round stops within ROUND_GAP of its optimum: its dual bound is the bound
+            row["bound"] = relaxed = _dual_bound(row["value"], stats.pop("dual_bound", None),
+                                                 data)  # fmt: skip
+            if data.direction is not None and relaxed < data.cap:
                 # no finer level can do better (containment): tighten the cap, and with it
-                # the model's bounds (big-M), to this level's answer
-                data.cap = min(data.cap, row["value"] * (1 + 1e-6) + 1e-12 * cap0)
+                # the model's bounds (big-M), to this level's bound
+                data.cap = min(data.cap, relaxed * (1 + 1e-6) + 1e-12 * cap0)
                 bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
@@ -503,6 +508,16 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
             np.any(sol.commands >= 0.99 * data.command_range[1]) and query.upper is None
         )
     return _bracket(sol, None, relaxed, data)
+
+
+def _dual_bound(value: float | None, bound: float | None, data: QueryData) -> float | None:
+    """The round's proven bound: its MIP's dual bound (MaxDisturbance: ``>= value``, at most
+    the cap; OptimalCommands: ``<= value``), or the value where the solver gave none."""
+    if value is None or bound is None or not math.isfinite(bound):
+        return value
+    if data.direction is not None:
+        return float(min(max(value, bound), data.cap))
+    return float(min(value, bound))
 
 
 class _BoxCut(Exception):

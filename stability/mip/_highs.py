@@ -42,11 +42,14 @@ _KIND = {"C": highspy.HighsVarType.kContinuous, "B": highspy.HighsVarType.kInteg
 def reformulate(model: MipModel) -> MipModel:
     """A copy of ``model`` with indicators and SOS2 sets replaced by rows and binaries (the
     original variables keep their indices; the encoding's binaries are appended)."""
+    if not model.indicators and not model.sos2:  # an LP or a plain MIP: nothing to add
+        return model
     out = MipModel(model.name + " (big-M, log SOS2)")
-    for j in range(model.n_vars):
-        out.add_var(model.lb[j], model.ub[j], model.kind[j], model.var_names[j])
-    for r in model.rows:
-        out.add_row(r.idx, r.val, r.lo, r.hi, r.name)
+    # the variables and rows as they are (already checked by the model): copied, not re-added
+    out.lb, out.ub = list(model.lb), list(model.ub)
+    out.kind, out.var_names = list(model.kind), list(model.var_names)
+    out.objective = np.zeros(model.n_vars)
+    out.rows = list(model.rows)
     for ind in model.indicators:
         for a, b in ind.as_le():  # z = active => a.x <= b
             _, top = model.activity_bounds(ind.idx, a)
@@ -139,7 +142,7 @@ def solve_highs(
     if time_limit is not None:
         h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("mip_rel_gap", float(gap))
-    h.setOptionValue("mip_abs_gap", float(gap))
+    h.setOptionValue("mip_abs_gap", min(float(gap), 1e-9))
     h.passModel(_to_lp(flat))
     h.run()
     status = h.getModelStatus()

@@ -42,7 +42,7 @@ def build_scip(
     if time_limit is not None:
         m.setParam("limits/time", float(time_limit))
     m.setParam("limits/gap", float(gap))
-    m.setParam("limits/absgap", float(gap))
+    m.setParam("limits/absgap", min(float(gap), 1e-9))  # the gap is relative; tiny values
     # SCIP's presolve otherwise drops indicator couplings with big coefficients and can
     # answer "optimal" with a wrong value once the model's bounds reach ~1e4 (measured:
     # the pinch pushed into a finger with cap 2000 gave 0 instead of the cap)

@@ -103,6 +103,9 @@ class MipModel:
         # False: SCIP solves without presolving (stability.model.run.run re-checks a SCIP
         # "infeasible" that way: its presolve has proved feasible models infeasible)
         self.presolve = True
+        # relative optimality gap at which a caller's solve may stop (None: the solver
+        # call's own); the dual bound then says how far the optimum can be
+        self.gap: float | None = None
 
     # ---------------------------------------------------------------- variables
 

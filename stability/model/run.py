@@ -103,7 +103,9 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
     left = opts.remaining()
     if left is not None and left <= 0.0:
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
-    res = mip.solve(problem.model, backend=opts.backend, time_limit=left, verbose=opts.verbose)
+    gap = 1e-9 if problem.model.gap is None else problem.model.gap
+    res = mip.solve(problem.model, backend=opts.backend, time_limit=left, verbose=opts.verbose,
+                    gap=gap)  # fmt: skip
     _count(res, stats)
     if opts.backend == "scip" and res.status in ("infeasible", "infeasible_or_unbounded"):
         # SCIP's presolve has proved feasible models infeasible (barrett_cube's grasp read
@@ -117,12 +119,13 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
             raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
         try:
             res = mip.solve(problem.model, backend=opts.backend, time_limit=left,
-                            verbose=opts.verbose)  # fmt: skip
+                            verbose=opts.verbose, gap=gap)  # fmt: skip
         finally:
             problem.model.presolve = True
         _count(res, stats)
         stats["infeasible_rechecked"] = stats.get("infeasible_rechecked", 0) + 1
     if res.status == "optimal":
+        stats["dual_bound"] = res.bound  # within the model's gap of the point's value
         x = res.x
         tidy = problem.tidy(x)
         if tidy is not None and _certified(problem, tidy):
