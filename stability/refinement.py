@@ -393,6 +393,7 @@ def _round(
     ``(lo, hi)`` on the query's value known to hold for this relaxation's optimum (the best
     exact value on one side, the previous round's bound on the other): the search skips
     every node outside them."""
+    t0 = time.perf_counter()
     rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
     var = add_query(rel.prob, data)
     M = rel.prob.model
@@ -406,8 +407,16 @@ def _round(
             M.add_row(rel.prob.fc, data.weights, lo, hi, "window")
     M.many_small = True
     M.gap = ROUND_GAP * ro.certify_gap
-    pt = run(rel.prob, opts, stats)
+    _clock(stats, "build_time_s", t0)
+    t0 = time.perf_counter()
+    pt = run(rel.prob, opts, stats)  # the MIP (stats["mip_time_s"]) and its least-motion LP
+    _clock(stats, "round_time_s", t0)
     return rel, pt, var
+
+
+def _clock(stats: dict[str, Any], key: str, t0: float) -> None:
+    """Add the seconds since ``t0`` to ``stats[key]`` (the profile of a query)."""
+    stats[key] = stats.get(key, 0.0) + time.perf_counter() - t0
 
 
 def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
@@ -461,9 +470,11 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
             if ro.certify:
                 # the relaxation's bounds (the cap may have been tightened since), the
                 # query's own cap: an exact point beyond them shows that they cut it off
+                t0 = time.perf_counter()
                 cert = certify(grasp, full, rel.prob.bounds, rel.prob, pt.x, var,
                                ro.normal_uncertainty, ro.motion_bound, row["value"],
                                ro.certify_gap)  # fmt: skip
+                _clock(stats, "certify_time_s", t0)
                 row["exact"] = None if cert is None else cert[2]
                 if cert is not None and (best is None or _better(cert[2], best[2], data)):
                     best = cert

@@ -63,6 +63,9 @@ THESIS = {
 }  # fmt: skip
 TARGETS = {3: (0.05, 0.15), 6: (5.0, 30.0)}  # contacts: (check s, max disturbance s)
 SEED = 7
+# the profile of a query (refinement's stats): model building, the rounds' MIPs, the rounds
+# (MIP plus its least-motion LP), certification (exact LPs); the rest is Python around them
+PROFILE = ("build_time_s", "mip_time_s", "round_time_s", "certify_time_s")
 
 
 def balanced_commands(g: Grasp, cone: float = 0.5, least: float = 1.0) -> np.ndarray | None:
@@ -135,7 +138,9 @@ def bench_grasps(
                          "task": task, "time_s": round(t, 4), "status": sol.status,
                          "answer": ans, "lower": sol.lower, "upper": sol.upper,
                          "rounds": len(sol.stats.get("rounds", [])),
-                         "certified": sol.stats.get("certified")})  # fmt: skip
+                         "certified": sol.stats.get("certified"),
+                         **{k: round(float(sol.stats.get(k, 0.0)), 4) for k in PROFILE},
+                         "nodes": sol.stats.get("nodes")})  # fmt: skip
             bar.update(1)
     bar.close()
     return rows
