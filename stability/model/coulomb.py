@@ -28,7 +28,8 @@ from .problem import ExactBounds, ExactPoint, ExactProblem, length_scale
 from .query import QueryData, add_query, query_value
 from .run import CONDITIONS
 
-__all__ = ["CoulombModel", "certify", "exact_conditions", "exact_point", "mode_lp", "polish"]
+__all__ = ["CoulombModel", "certify", "exact_conditions", "exact_point", "mode_lp", "polish",
+           "stuck_point"]
 
 
 def exact_conditions(eta: float) -> tuple[str, ...]:
@@ -227,6 +228,35 @@ def certify(
     return ex, pt, query_value(ex, pt, qvar, data)
 
 
+def stuck_point(
+    grasp: Grasp, data: QueryData, bounds: ExactBounds, eta: float, motion_bound: float,
+) -> tuple[CoulombModel, ExactPoint, float | None] | None:  # fmt: skip
+    """The query's optimum with every contact closed and sticking and every actuator locked
+    (one LP, friction in :func:`inscribed_friction`'s polygon): an exact solution when there
+    is one, as :func:`certify` returns it; None otherwise. A cheap first certificate: a
+    grasp that holds without slipping needs no MIP to say "stable", and a MaxDisturbance
+    starts from its value as a lower bound."""
+    ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
+    qvar = add_query(ex.prob, data)
+    prob = ex.prob
+    x = np.zeros(prob.model.n_vars)
+    x[prob.y] = 1.0
+    if prob.z is not None:
+        x[prob.z] = 1.0
+    x[prob.c[:, 0]] = 1.0  # loaded: "stick" below, not "open"
+    modes = [("stick", 0.0)] * grasp.m
+    lp = _modes_lp(ex, x, modes, {})
+    res = mip_solve(lp, backend="highs", polish=False)
+    if res.status != "optimal" or res.x is None:
+        return None
+    y = prob.tidy(res.x, lp=lp)
+    y = (res.x if y is None else y)[: prob.model.n_vars]
+    if max(ex.violations(y, box=False).values()) > 1e-7 * (1.0 + bounds.force):
+        return None
+    pt = prob.point(y)
+    return ex, pt, query_value(ex, pt, qvar, data)
+
+
 def slide_search(
     ex: CoulombModel, x: NDArray[np.float64], target: float | None = None, gap: float = 0.0,
     steps: int = 8,
@@ -286,10 +316,30 @@ def slide_search(
             return True
         return got[2] >= sign * target - gap * (1.0 + abs(target)) - 1e-12
 
+    def rehint(point: NDArray[np.float64]) -> bool:
+        """Centre the fine polygon vertices of each sticking contact whose friction lies on
+        its polygon's boundary at that friction's direction (the relaxation's hint was only
+        a guess: an inscribed polygon loses up to 1 - cos(pi / 32) of the cone away from
+        its fine vertices); True if any moved."""
+        moved = False
+        for i, (mode, hint) in enumerate(modes):
+            ct, cn = point[prob.c[i, 1:]], float(point[prob.c[i, 0]])
+            if mode != "stick" or cn <= fscale:
+                continue
+            if np.linalg.norm(ct) >= (1.0 - 1e-3) * float(g.mu[i]) * cn:
+                a = math.atan2(ct[1], ct[0])
+                if abs(math.remainder(a - hint, 2.0 * math.pi)) > STICK_FINE[1]:
+                    modes[i] = ("stick", a)
+                    moved = True
+        return moved
+
     cur = exact_lp(phi)
     if cur is None:
         return None
+    if rehint(cur[1]):
+        cur = exact_lp(phi) or cur
     best = cur if cur[3] <= feas else None
+    best_phi = dict(phi)
     rho = 0.05
     for _ in range(steps if sliding else 0):
         if done(best):
@@ -308,8 +358,10 @@ def slide_search(
         got = exact_lp(trial)
         if got is not None and merit(got) >= merit(cur) - 1e-12 * (1.0 + abs(merit(cur))):
             cur, phi = got, trial
-            if got[3] <= feas and (best is None or got[2] >= best[2]):
-                best = got
+            if rehint(cur[1]):
+                cur = exact_lp(phi) or cur
+            if cur[3] <= feas and (best is None or cur[2] >= best[2]):
+                best, best_phi = cur, dict(phi)
             rho = min(4.0 * rho, 0.5)
         else:
             rho /= 4.0
@@ -333,7 +385,14 @@ def slide_search(
             break
         start, phi = got, trial
         if got[3] <= feas and (best is None or got[2] >= best[2]):
-            best = got
+            best, best_phi = got, dict(phi)
+    for _ in range(3):  # the best point's sticking friction on its polygon: finer there
+        if best is None or not rehint(best[1]):
+            break
+        got = exact_lp(best_phi)
+        if got is None or got[3] > feas or got[2] < best[2]:
+            break
+        best = got
     if best is None:
         return None
     lp, xb, _, _ = best
