@@ -28,8 +28,15 @@ from .problem import ExactBounds, ExactPoint, ExactProblem, length_scale
 from .query import QueryData, add_query, query_value
 from .run import CONDITIONS
 
-__all__ = ["CoulombModel", "certify", "exact_conditions", "exact_point", "mode_lp", "polish",
-           "stuck_point"]
+__all__ = [
+    "CoulombModel",
+    "certify",
+    "exact_conditions",
+    "exact_point",
+    "mode_lp",
+    "polish",
+    "stuck_point",
+]
 
 
 def exact_conditions(eta: float) -> tuple[str, ...]:
