@@ -57,16 +57,26 @@ Queries, all by the same loop: ``Existence`` (feasibility), ``MaxDisturbance`` (
 ``s``, one MIP per level, no bisection), ``OptimalCommands`` (minimise the largest command,
 or ``weights . f_c``; per-actuator ``lower``/``upper``; ``max_normal_force``).
 
-Certificates (``certify=True``, default): after each round the answer's contact modes
-(open; sliding along its motion; friction on the cone's boundary; sticking) are fixed and
-the *exact* problem (circular cone, maximum dissipation) becomes one LP
-(:func:`stability.model.coulomb.certify`); a point of it is an exact solution. ``Existence``
-returns it at once (stable). ``MaxDisturbance`` / ``OptimalCommands`` return it when its
-value meets the relaxation's bound within ``certify_gap`` (default 1e-6): the exact
-optimum lies between the two. Otherwise the loop goes on and the best certified value is
-``stats["exact_value"]`` beside the relaxation's answer; ``stats["certified"]`` says which
-was returned. A returned certificate satisfies every condition, ``friction_cone`` and
-``max_dissipation`` included.
+Brackets and certificates (``certify=True``, default): every optimisation answer carries
+``Solution.lower <= optimum <= Solution.upper``. The feasible side (MaxDisturbance
+``lower``, OptimalCommands ``upper``) is the value of an exact point: the relaxed answer's
+contact modes (open, sticking, sliding) with the slide directions optimised by sequential
+LP (:func:`stability.model.coulomb.certify`); it satisfies every condition, the circular
+cone and maximum dissipation included, and is the point returned. The other side is the
+last round's MIP dual bound (containment: it bounds every finer level). A first exact
+point has every contact sticking and every actuator locked (one LP). ``Existence``
+answers "stable" only with an exact point and "unstable" only with an infeasible
+relaxation (a proof); a feasible finest relaxation without an exact point is
+``status="not_converged"``. The loop stops once the bracket is closed to ``certify_gap``
+(default 1e-4 relative, ``stats["certified"]``) or at the finest level; a time-out keeps
+the bracket reached. Each round searches only the window between the best exact value
+and the last bound, and stops within ``ROUND_GAP * certify_gap`` of its optimum.
+
+The box (``bound_factor``, default :data:`REFINEMENT_BOUND_FACTOR` = 1e4 here, 100 for the
+other methods): forces, separations, transmission motions and slide weights are bounded
+by it times the query's force scale. An exact point beyond the relaxation's bound shows
+that the box cut the optimum off: the box grows tenfold and the query is solved again
+(``stats["box_enlarged"]``, at most :data:`BOX_RETRIES` times).
 """
 
 from __future__ import annotations
