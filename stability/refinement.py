@@ -72,7 +72,7 @@ relaxation (a proof); a feasible finest relaxation without an exact point is
 the bracket reached. Each round searches only the window between the best exact value
 and the last bound, and stops within ``ROUND_GAP * certify_gap`` of its optimum.
 
-The box (``bound_factor``, default :data:`REFINEMENT_BOUND_FACTOR` = 1e4 here, 100 for the
+The box (``bound_factor``, default :data:`REFINEMENT_BOUND_FACTOR` = 1e3 here, 100 for the
 other methods): forces, separations, transmission motions and slide weights are bounded
 by it times the query's force scale. An exact point beyond the relaxation's bound shows
 that the box cut the optimum off: the box grows tenfold and the query is solved again
@@ -109,7 +109,7 @@ _REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_
 TWO_PI = 2.0 * math.pi
 ROUND_GAP = 0.25  # a round's MIP stops within this fraction of certify_gap (relative)
 WINDOW_SLACK = 1e-7  # relative widening of the value window a round searches
-REFINEMENT_BOUND_FACTOR = 1e4  # the default box (bound_factor), see _solve_refinement
+REFINEMENT_BOUND_FACTOR = 1e3  # the default box (bound_factor), see _solve_refinement
 BOX_RETRIES = 2  # tenfold enlargements of the box when it cuts the optimum off
 REFINE_STEP = 2  # levels a needed sector is refined by per round (measured: 2 beats 1, 3)
 
@@ -629,11 +629,13 @@ def _solve_refinement(grasp: Grasp, query: Any, **options: Any) -> Solution:
     # at most BOX_RETRIES times, within the same time limit.
     t0 = time.perf_counter()
     limit = options.get("time_limit")
-    # The box: 1e4 times the force scale. Sliding and joint motions that load no spring are
+    # The box: 1e3 times the force scale. Sliding and joint motions that load no spring are
     # virtual and can be large: on a benchmark grasp (python -m stability.bench grasps, (a))
     # the cheapest commands for a wrench move a joint by 7e4 force units, and at the other
     # methods' 100 the relaxation's "optimum" was 9.6 % too high, certified within its box;
-    # 1e3 and 1e5 gave the same answer as 1e4, in about the same time.
+    # 1e3, 1e4 and 1e5 give the same answer. A larger box weakens the MIPs' relaxations: a
+    # 6-contact round took 0.6 s at 100, 10.5 s at 1e3, and at 1e4 SCIP's presolve called
+    # feasible rounds infeasible (caught by the recheck without presolve, which is slow).
     options.setdefault("bound_factor", REFINEMENT_BOUND_FACTOR)
     factor = float(options["bound_factor"])
     cuts: list[str] = []
