@@ -481,6 +481,10 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 # no finer level can do better (containment): tighten the cap, and with it
                 # the model's bounds (big-M), to this level's bound
                 data.cap = min(data.cap, relaxed * (1 + 1e-6) + 1e-12 * cap0)
+                # (the box, from the force scale at the cap, shrinks with it: a box kept at
+                # the first cap's scale let the relaxation gain 7e-4 on grasp (a)'s first
+                # direction through slides of 1e5 misaligned by 0.2 deg, and no exact point
+                # found any of it)
                 bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)

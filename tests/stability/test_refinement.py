@@ -182,7 +182,16 @@ def test_max_disturbance_never_increases_with_refinement_level(case) -> None:
     h = _max(g, d, commands=cmd, levels=Q)
     rounds = [r["value"] for r in h.stats["rounds"] if r["feasible"]]
     assert all(b <= a * (1 + 1e-6) + 1e-9 for a, b in zip(rounds, rounds[1:], strict=False))
-    assert (h.upper if h.stable else 0.0) == pytest.approx(vals[-1], rel=1e-4, abs=1e-7)
+    # the same relaxation at the same box: the loop's box follows its cap (the force scale
+    # of the answer) while the uniform run's stays at cap 100's, and at refinement's default
+    # bound_factor (1e3) the larger box lets the relaxation gain 2e-4 here; at 100 the two
+    # boxes hold the same optimum
+    h100 = _max(g, d, commands=cmd, levels=Q, bound_factor=100.0)
+    u100 = _max(g, d, commands=cmd, levels=Q, refine=False, start_level=Q + 1,
+                bound_factor=100.0)  # fmt: skip
+    if h100.stable:
+        assert h100.upper == pytest.approx(u100.upper, rel=1e-5, abs=1e-7)
+    assert (h.upper if h.stable else 0.0) <= vals[-1] * (1 + 1e-6) + 1e-9
     if h.stable:
         _check(h)
 
