@@ -1,4 +1,4 @@
-"""Mixed-integer programs for the 3D methods: one model layer, two solvers.
+"""Mixed-integer programs for the 3D methods: one model layer, three solvers.
 
 >>> from stability.mip import MipModel, solve
 >>> m = MipModel("toy")
@@ -12,8 +12,11 @@
 ('optimal', 4.0)
 
 ``backend="highs"`` (``highspy``; indicators as big-M from the model's own bounds, SOS2 as
-a logarithmic encoding, :mod:`stability.mip._highs`) or ``"scip"`` (``pyscipopt``; native
-indicator and SOS2 constraints). Both return a :class:`MipResult`; a time-out or a solver
+a logarithmic encoding, :mod:`stability.mip._highs`), ``"scip"`` (``pyscipopt``; native
+indicator and SOS2 constraints) or ``"gurobi"`` (``gurobipy``, optional: ``pip install
+ihm[gurobi]``; native indicator and SOS2 constraints, one thread; the pip licence's size
+limit of 2000 variables and 2000 constraints is a status ``"error"`` that says so,
+:mod:`stability.mip._gurobi`). All return a :class:`MipResult`; a time-out or a solver
 failure is a status (``"timeout"``, ``"error"``), never an exception from the solver's
 internals and never an unchecked answer: every returned point is measured against the
 model's exact conditions (:meth:`MipModel.violations`) and an "optimal" point that fails
@@ -22,6 +25,8 @@ them is reported as ``"error"``.
 
 from __future__ import annotations
 
+import functools
+import importlib
 import importlib.util
 import math
 import time
@@ -37,8 +42,9 @@ from .model import INF, MipModel
 __all__ = ["BACKENDS", "DEFAULT_BACKEND", "INF", "MipModel", "MipResult", "available_backends",
            "build_scip", "check_backend", "optimize_scip", "solve"]  # fmt: skip
 
-BACKENDS = ("highs", "scip")
-_PACKAGES = {"highs": "highspy", "scip": "pyscipopt"}  # the package each backend needs
+BACKENDS = ("highs", "scip", "gurobi")
+# the package each backend needs
+_PACKAGES = {"highs": "highspy", "scip": "pyscipopt", "gurobi": "gurobipy"}
 DEFAULT_BACKEND = "highs"
 STATUSES = ("optimal", "infeasible", "unbounded", "infeasible_or_unbounded", "timeout", "error")
 
@@ -71,8 +77,25 @@ class MipResult:
 
 
 def available_backends() -> list[str]:
-    """The backends whose solver package is installed."""
-    return [b for b in BACKENDS if importlib.util.find_spec(_PACKAGES[b]) is not None]
+    """The backends whose solver package is installed (for ``"gurobi"``: installed and
+    importable, as ``gurobipy`` is a binary wheel that may fail to load)."""
+    return [b for b in BACKENDS if _installed(b)]
+
+
+def _installed(backend: str) -> bool:
+    pkg = _PACKAGES[backend]
+    if importlib.util.find_spec(pkg) is None:
+        return False
+    return backend != "gurobi" or _imports(pkg)
+
+
+@functools.cache
+def _imports(pkg: str) -> bool:
+    try:
+        importlib.import_module(pkg)
+    except Exception:  # noqa: BLE001  (any failure to load means "not available")
+        return False
+    return True
 
 
 def check_backend(backend: str) -> None:
@@ -101,8 +124,8 @@ def solve(
     Args:
         time_limit: seconds (``None``: no limit); reaching it gives ``status="timeout"``.
         verbose: the solver's own log on stdout (off by default).
-        gap: relative and absolute optimality gap at which the solver may stop (both
-            backends get the same).
+        gap: relative and absolute optimality gap at which the solver may stop (every
+            backend gets the same).
         tol: largest violation of the exact conditions a returned point may have, relative
             to ``1 + max|x|``.
         polish: re-solve the LP left when the integer variables are fixed at the answer's
@@ -124,6 +147,8 @@ def solve(
         raise ModelError(f"need 0 <= gap < 1 and tol > 0, got gap={gap}, tol={tol}")
     if backend == "highs":
         from ._highs import solve_highs as run
+    elif backend == "gurobi":
+        from ._gurobi import solve_gurobi as run
     else:
         from ._scip import solve_scip as run
     try:

@@ -41,8 +41,9 @@ def default_backend(method: str) -> str:
 
 @dataclass
 class MipOptions:
-    """Options of every MIP method: ``backend`` (``"highs"`` or ``"scip"``; default: the
-    method's measured faster one, :data:`DEFAULT_BACKENDS`), ``time_limit``
+    """Options of every MIP method: ``backend`` (``"highs"``, ``"scip"`` or, with ``gurobipy``
+    installed, ``"gurobi"``; default: the method's measured faster one,
+    :data:`DEFAULT_BACKENDS`; checked by :func:`stability.mip.check_backend`), ``time_limit``
     [s] for the whole method call (None: none), ``verbose`` (the solver's log), ``edges``
     (friction polygon sides, spatial contacts), ``bound_factor`` (model bounds as a multiple
     of the problem's force scale, :func:`stability.model.problem.scale_bounds`)."""

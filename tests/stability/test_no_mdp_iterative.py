@@ -291,7 +291,7 @@ def test_bad_input_gets_clear_errors():
     with pytest.raises(GraspError, match="without a hand"):
         solve(P.wedge(), Existence(wrench=np.zeros(6), commands=[1.0]), method="no_mdp")
     with pytest.raises(GraspError, match="unknown MIP backend"):
-        solve(g, q, method="no_mdp", backend="gurobi")
+        solve(g, q, method="no_mdp", backend="cplex")
     with pytest.raises(GraspError, match="unknown option"):
         solve(g, q, method="no_mdp", gama=1.0)
     with pytest.raises(GraspError, match="gamma"):
