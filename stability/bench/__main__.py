@@ -39,6 +39,11 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--backends", default=None,
                     help="grasps: more MIP backends for refinement, comma-separated "
                     "(e.g. gurobi)")  # fmt: skip
+    ap.add_argument(
+        "--skip-default",
+        action="store_true",
+        help="grasps: run only --backends (and --baseline), not the default",
+    )
     return ap
 
 

@@ -315,7 +315,9 @@ def cli(args: argparse.Namespace) -> None:
     base = None
     if getattr(args, "baseline", None):
         base = baseline(args.baseline, args)
-    rows = bench_grasps(args.directions, args.wrenches, limit, only=args.only)
+    rows = []
+    if not getattr(args, "skip_default", False):
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only)
     for b in [b for b in (getattr(args, "backends", None) or "").split(",") if b]:
         rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b)
     if base is not None:
@@ -323,11 +325,14 @@ def cli(args: argparse.Namespace) -> None:
         proc.wait()
         rows += read_baseline(out, args.baseline)
     mine = [r for r in rows if r["variant"] == "default"]
-    print_grasps(summary(mine))
+    if mine:
+        print_grasps(summary(mine))
     summ = by_contacts(rows, limit)
     print_by_contacts(summ)
-    csv_path, _ = write_grasps(mine, Path(args.out))
-    write_csv(Path(args.out) / "grasps.csv", rows)
+    if mine:
+        write_grasps(mine, Path(args.out))
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    csv_path = write_csv(Path(args.out) / "grasps.csv", rows)
     write_csv(Path(args.out) / "grasps_summary.csv", summ)
     png = chart(summ, Path(args.out) / "grasps.png")
     print(f"wrote {csv_path}, grasps_summary.csv and {png}")

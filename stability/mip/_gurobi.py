@@ -189,7 +189,7 @@ def _build(
     if time_limit is not None:
         m.Params.TimeLimit = float(time_limit)
     m.Params.MIPGap = float(gap)
-    m.Params.MIPGapAbs = float(gap)
+    m.Params.MIPGapAbs = min(float(gap), 1e-9)  # the gap is relative; tiny values
     if model.many_small:
         # one of many small MIPs (a refinement round), as for SCIP (stability.mip._scip):
         # cutting planes and primal heuristics cost more than they save. Measured on the 73
