@@ -107,7 +107,9 @@ class Solution:
         Object motion ``r`` (planar ``(x, y, theta)``); virtual, since springs
         have unit stiffness. None where the method has no motion (``gws``).
     value : float or None
-        Optimisation queries: the optimum (MaxDisturbance: largest ``s``).
+        Optimisation queries: the optimum (MaxDisturbance: largest ``s``); set on every
+        stable answer, None on an unstable one (no ``s`` in ``[0, cap]`` holds; no
+        commands within the limits hold).
     states : (m,) array of str or None
         Per-contact state: planar ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``;
         the 3D MIP methods ``"stick"``, ``"slip"`` (tangential motion), ``"detach"``.
@@ -115,9 +117,12 @@ class Solution:
         At least ``time_s``; methods add counts (states visited, LPs solved, ...).
     status : str
         ``"solved"`` (``stable`` is the answer), ``"timeout"`` (the method's ``time_limit``
-        ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap) or
-        ``"error"`` (a backend failed; ``stats["message"]`` says why). Only ``"solved"``
-        carries an answer: the others have ``stable=None``.
+        ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap or
+        stopped where it cannot answer) or ``"error"`` (a backend failed, or the answer
+        lacked what it must carry); ``stats["message"]`` says why. Only ``"solved"``
+        carries an answer: the others have ``stable=None``. A stable answer of an
+        optimisation query (MaxDisturbance, OptimalCommands) always has a finite
+        ``value``: :func:`stability.solve` turns one without into ``"error"``.
     actuator_forces : (a,) array or None
         Hands: actuator forces ``f`` with ``J^T c = R f`` [N or N m].
     commands : (a,) array or None

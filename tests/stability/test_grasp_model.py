@@ -478,6 +478,35 @@ def test_gws_residuals_have_force_keys_only(grasp):
     assert dataclasses.replace(sol, forces=forces).residuals()["equilibrium"] > 0.05
 
 
+def test_solve_turns_a_solved_answer_without_its_value_into_an_error():
+    """The one gate every method passes (``stability.solve``): a stable answer of an
+    optimisation query without a finite value, or "solved" without stable/unstable, is
+    status "error" with a message, never an answer."""
+    from stability import Solution, api
+
+    answers = {"stable": (True, None), "nan": (True, float("nan")), "none": (None, 1.0)}
+
+    @api.register("_broken", queries=(Existence, MaxDisturbance, OptimalCommands),
+                  planar=True, spatial=True, hand=True)  # fmt: skip
+    def _broken(grasp, query, answer="stable"):
+        stable, value = answers[answer]
+        return Solution(stable, "_broken", grasp, query, value=value)
+
+    try:
+        g = three()
+        for answer in answers:
+            for q in (MaxDisturbance(direction=[0, 1, 0]), OptimalCommands([0, 1, 0])):
+                sol = solve(g, q, method="_broken", answer=answer)
+                assert sol.status == "error" and sol.stable is None, (answer, q)
+                assert "_broken" in sol.stats["message"]
+        assert solve(g, Existence([0, 1, 0]), method="_broken").status == "solved"
+        assert solve(g, Existence([0, 1, 0]), method="_broken", answer="none").status == "error"
+    finally:
+        api._METHODS.pop("_broken")
+    ok = solve(g, MaxDisturbance(direction=[0, 1, 0], preload=1.0), method="planar")
+    assert ok.status == "solved" and ok.value == pytest.approx(1.0)
+
+
 # -- 5. available_methods -------------------------------------------------------------------
 def test_available_methods():
     names = available_methods()
