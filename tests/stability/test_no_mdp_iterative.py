@@ -118,7 +118,18 @@ def test_wedge_no_mdp_creates_energy(backend):
     stored = 0.5 * float(np.sum(sol.forces[:, 0] ** 2))  # unit springs, no preload
     assert stored > 1.0 and work <= 1e-9 * stored
     assert res["max_dissipation"] > 1.0  # friction does not oppose the sliding
+    assert res["slide_alignment"] > 0.1  # ... as a force too
     assert abs(sol.motion[5]) > 0  # the virtual rotation that wedges it
+    # max_residual covers every condition of the model, the dropped ones included; the
+    # method's own promise is max_residual(enforced=True)
+    assert sol.max_residual() == max(res.values()) >= res["max_dissipation"]
+    assert sol.max_residual(enforced=True) <= TOL * (1 + np.abs(sol.forces).max())
+    assert sol.max_residual(["max_dissipation"]) == res["max_dissipation"]
+    assert sol.max_residual("spring_law") == res["spring_law"]
+    with pytest.raises(ValueError, match="unknown condition"):
+        sol.max_residual(["dissipation"])
+    with pytest.raises(ValueError, match="not both"):
+        sol.max_residual(["equilibrium"], enforced=True)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
