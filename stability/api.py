@@ -7,6 +7,7 @@ method keeps its old name as an alias that warns (:data:`RENAMED_METHODS`).
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -136,4 +137,31 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
     t0 = time.perf_counter()
     sol = info.fn(grasp, query, **options)
     sol.stats["time_s"] = time.perf_counter() - t0
+    return _answer_or_error(sol)
+
+
+def _answer_or_error(sol: Solution) -> Solution:
+    """Every method's answer passes here: a ``"solved"`` answer says stable or not, and a
+    stable answer of an optimisation query (MaxDisturbance, OptimalCommands) has a finite
+    ``value``. Anything else is turned into ``status="error"`` (``stable=None``,
+    ``stats["message"]`` says what was missing), never passed on as an answer; the
+    method's point, if any, is kept for inspection. (``iterative`` once answered
+    ``"solved"`` with ``value=None``.)"""
+    if sol.status != "solved":
+        return sol
+    problem = None
+    if sol.stable is None:
+        problem = "status 'solved' without a stable/unstable answer"
+    elif sol.stable and isinstance(sol.query, MaxDisturbance | OptimalCommands):
+        v = sol.value
+        try:
+            finite = v is not None and math.isfinite(float(v))
+        except (TypeError, ValueError):
+            finite = False
+        if not finite:
+            problem = f"a stable {type(sol.query).__name__} answer without a value ({v!r})"
+    if problem is not None:
+        sol.stats["message"] = f"method {sol.method!r} returned {problem}"
+        sol.stats["unchecked_status"] = sol.status
+        sol.status, sol.stable = "error", None
     return sol

@@ -15,7 +15,20 @@ or torque / ``L``, preload, or contact force of a command; see
 :func:`~stability.model.problem.scale_bounds`): ``net_tol = 1e-3`` is the thesis' 1e-3 N for its
 loads of about 1 N, made relative so that a small load is not "held" by no force at all. An
 iteration cap reached first is the status ``"not_converged"`` with ``stable=None``, never a
-guess.
+guess (``stats["message"]`` says where).
+
+A stop above ``net_tol`` is first checked down the ray (``stats["far_steps"]``,
+``"far_moves"``): the net wrench can stop changing on a *plateau*, where the hand follows
+the object at its commanded forces so the net wrench is the same all along the ray, and the
+least-motion optimum is then no step at all (step 0, "converged") while an equilibrium lies
+beyond ``gamma`` times the small net wrench. One step with the ray as long as a contact can
+move in the model (``2 B``) decides: a lower net wrench there and the loop goes on from it,
+else "unstable". Measured on 75 random 3-contact MaxDisturbance queries
+(``random_fingers``, seeds 100-102, balanced commands scaled by U(0.5, 1.5), cap 100): 12
+commanded preloads stalled so (e.g. a net wrench of 0.0102 N, flat for steps 0 to 100,
+balanced at a step of 180, the object moved by 1.8; ``exact`` holds those commands), and
+each query was answered "unstable" (status ``"solved"``, ``value=None``, 0.03 s); with
+the look all 75 are answered stable but one that hits the iteration cap.
 
 Commands are applied first: the scheme runs with ``w = 0`` from ``r = 0`` to the commanded
 preload's state ``(r_pre, q_pre)`` (``stats["preload_trace"]``), then with the disturbance
@@ -27,6 +40,13 @@ cannot make. ``MaxDisturbance`` bisects on ``s`` in ``[0, cap]``: ``cap`` first,
 decade search down from it, then bisection until ``hi - lo <= rtol * hi + atol``
 (``bisection_rtol = 1e-3``, ``atol = 1e-9 cap``); the result is the largest stable ``s``
 found (a lower bound within that tolerance of the stability boundary of the scheme).
+When the commanded preload alone is not stable for the scheme, a MaxDisturbance has no
+answer (status ``"not_converged"``, ``stats["message"]``): the disturbance is applied from
+the preload's state, and the stable set along the ray need not contain ``s = 0`` (with
+commands drawn U(0.02, 0.2), 6 of 75 such queries; on one, ``exact`` holds the cap of 100
+where ``s = 0`` is unstable, on two others ``exact`` holds ``s = 0`` itself). It used to
+answer "unstable" (status ``"solved"``, ``value=None``) from the preload alone. An
+``Existence`` query still answers "unstable" there (the scheme's own answer).
 
 Units and the metric ``M``: springs have unit stiffness, so motion is measured in newtons.
 The thesis moves the object along ``w^{k-1}`` itself, which mixes N and N m; here the
@@ -99,15 +119,46 @@ class _Scheme:
         bounds: ExactBounds,
         r_prev: NDArray[np.float64],
         w_prev: NDArray[np.float64],
+        gamma: float | None = None,
     ) -> tuple[ExactProblem, ExactPoint | None, float]:
-        """Algorithm iterative: the movement constrained existence problem."""
+        """Algorithm iterative: the movement constrained existence problem (the ray's
+        length ``gamma``, default the option's)."""
         prob = ExactProblem(self.grasp, self.data.preload, self.data.hand, bounds,
                             self.opts.edges, name="iterative step",
                             hand_reference=self.q_ref)  # fmt: skip
         prob.add_net_wrench(w, self.weights)
-        s = prob.add_motion_ray(r_prev, self.metric * w_prev, self.gamma)
+        s = prob.add_motion_ray(r_prev, self.metric * w_prev, gamma or self.gamma)
         pt = run(prob, self.opts, self.stats)
         return prob, pt, (math.nan if pt is None else float(pt.x[s]))
+
+    def look_down_ray(
+        self,
+        w: NDArray[np.float64],
+        bounds: ExactBounds,
+        r: NDArray[np.float64],
+        w_net: NDArray[np.float64],
+        below: float,
+    ) -> tuple[tuple[ExactProblem, ExactPoint, float], NDArray[np.float64]] | None:
+        """One step from ``r`` along the net wrench ``w_net`` with the ray as long as a contact
+        can move in the model (``2 B``, not ``gamma``); the step and its net wrench when that
+        is below ``below``, else None. ``stats["far_steps"]`` counts the looks, and
+        ``stats["far_moves"]`` those that found a lower net wrench."""
+        direction = self.metric * w_net
+        reach = float(np.abs(self.grasp.G.T @ direction).max(initial=0.0))
+        if reach <= 0.0:
+            return None
+        gamma = 2.0 * bounds.force / reach
+        if gamma <= self.gamma:
+            return None
+        self.stats["far_steps"] = self.stats.get("far_steps", 0) + 1
+        prob, pt, s = self.step(w, bounds, r, w_net, gamma)
+        if pt is None:
+            return None
+        w_k = self.grasp.G @ pt.forces.reshape(-1) + w
+        if self.norm(w_k) >= below:
+            return None
+        self.stats["far_moves"] = self.stats.get("far_moves", 0) + 1
+        return (prob, pt, s), w_k
 
     def loop(
         self, w: NDArray[np.float64], r0: NDArray[np.float64]
@@ -120,7 +171,7 @@ class _Scheme:
         scale = bounds.scale  # N: the load this loop carries
         r_prev, w_prev = r0, w
         trace: list[dict[str, float]] = []
-        for _ in range(self.max_iter):
+        while len(trace) < self.max_iter:
             prob, pt, s = self.step(w, bounds, r_prev, w_prev)
             if pt is None:
                 return "infeasible", None, None, trace
@@ -128,8 +179,19 @@ class _Scheme:
             net = self.norm(w_k)
             trace.append({"net": net, "step": s})
             if self.norm(w_prev - w_k) < self.epsilon * scale:
-                stable = net < self.net_tol * scale
-                return ("stable" if stable else "unstable"), prob, pt, trace
+                if net < self.net_tol * scale:
+                    return "stable", prob, pt, trace
+                # The net wrench stopped changing above the tolerance. That may be a
+                # plateau, not an object pushed away: the hand follows the object at its
+                # commanded forces, the net wrench is the same all along the ray, and the
+                # least-motion optimum is no step at all, while an equilibrium lies beyond
+                # gamma. So look down the ray as far as a contact can move in the model
+                # (2 B) before answering "unstable"; a lower net wrench there goes on.
+                far = self.look_down_ray(w, bounds, pt.motion, w_k, net - self.epsilon * scale)
+                if far is None:
+                    return "unstable", prob, pt, trace
+                (prob, pt, s), w_k = far
+                trace.append({"net": self.norm(w_k), "step": s, "far": True})
             r_prev, w_prev = pt.motion, w_k
         return "not_converged", prob, pt, trace
 
@@ -183,9 +245,18 @@ def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options:
         if out != "stable":
             stats["reason"] = f"the commanded preload alone is {out.replace('_', ' ')}"
             if out == "not_converged":
-                return solution("iterative", grasp, query, None, stats, status="not_converged")
+                return _not_converged(grasp, query, stats)
             if data.direction is not None:
-                stats["capped"] = False
+                # MaxDisturbance: the bisection applies the disturbance from the preload's
+                # state, and the stable set along the ray need not contain s = 0 (an
+                # unbalanced command can be held by a disturbance against it); nor does the
+                # scheme's stop prove s = 0 unstable. So no answer, rather than "unstable"
+                # for every s in [0, cap] (was: status "solved", value None, in 0.03 s).
+                stats["reason"] += (
+                    "; the scheme starts the disturbance from the commands' "
+                    "equilibrium, so it cannot answer this MaxDisturbance"
+                )
+                return _not_converged(grasp, query, stats)
             return solution("iterative", grasp, query, False, stats)
         r_pre = pt.motion
         sch.q_ref = pt.hand_motion  # the transmissions lock where the preload left them
@@ -193,7 +264,8 @@ def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options:
             out, prob, pt, trace = sch.loop(data.wrench, r_pre)
             stats["trace"], stats["iterations"] = trace, len(trace)
             if out == "not_converged":
-                return solution("iterative", grasp, query, None, stats, status="not_converged")
+                stats["reason"] = f"the scheme did not converge in {len(trace)} steps"
+                return _not_converged(grasp, query, stats)
             if out != "stable":
                 return solution("iterative", grasp, query, False, stats)
             return solution("iterative", grasp, query, True, stats, prob, pt)
@@ -248,7 +320,7 @@ def _bisect(sch, grasp, query, data, preload, stats, rtol) -> Solution:
                     hi = mid
     except _NotConverged as e:
         stats["reason"] = f"the scheme did not converge at s = {e.s:g}"
-        return solution("iterative", grasp, query, None, stats, status="not_converged")
+        return _not_converged(grasp, query, stats)
     stats["capped"] = bool(best is not None and best[0] >= cap)
     stats["bracket"] = (lo, hi)
     if best is None:  # only s = 0, the preload's own state, is stable
@@ -256,6 +328,12 @@ def _bisect(sch, grasp, query, data, preload, stats, rtol) -> Solution:
     s, prob, pt, trace = best
     stats["trace"], stats["iterations"] = trace, len(trace)
     return solution("iterative", grasp, query, True, stats, prob, pt, value=float(s))
+
+
+def _not_converged(grasp: Grasp, query: Any, stats: dict[str, Any]) -> Solution:
+    """No answer: status ``"not_converged"``, ``stats["message"]`` the reason."""
+    stats["message"] = stats["reason"]
+    return solution("iterative", grasp, query, None, stats, status="not_converged")
 
 
 class _NotConverged(Exception):

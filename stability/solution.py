@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -11,7 +12,14 @@ from numpy.typing import NDArray
 from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, Query
 
-__all__ = ["Solution", "model_residuals"]
+__all__ = ["MODEL_CONDITIONS", "SLIDE_TOL", "Solution", "model_residuals"]
+
+# every key model_residuals can return, in its order
+MODEL_CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation",
+              "slide_alignment", "hand_equilibrium", "actuator_command", "nonbackdrivable",
+              "actuator_complementarity")  # fmt: skip
+# a contact slides when |d_t| > SLIDE_TOL (1 + max |d|) (slide_alignment; measured)
+SLIDE_TOL = 1e-9
 
 
 def model_residuals(
@@ -34,7 +42,19 @@ def model_residuals(
       ``d = G^T r - J q`` (thesis eq. normal_compliance).
     * ``max_dissipation`` (needs ``motion``): ``max(c_t . d_t + mu c_n |d_t|)``,
       zero iff friction opposes sliding at full magnitude (thesis eq. cone);
-      non-negative whenever the cone holds.
+      non-negative whenever the cone holds. A product [N x motion]: a small slide hides a
+      misaligned friction (0.83 N off on a slide of 7e-5 is at most 6e-5 here).
+    * ``slide_alignment`` (needs ``motion``) [N]: ``max |c_t + mu c_n d_t / |d_t||`` over
+      the loaded contacts (``c_n > 0``) that slide, ``|d_t| > SLIDE_TOL (1 + max |d|)``
+      (``SLIDE_TOL = 1e-9``; ``d`` is every contact's motion, normal parts included): the
+      same maximum dissipation as a force, whatever the slide's size: friction opposes the
+      slide at full magnitude. 0 when no contact slides. The threshold is relative to the
+      motion's scale so that a sticking contact whose tangential motion is round-off is
+      not a slide: over the test suite's exact answers (``planar``, ``exact``,
+      ``refinement``'s certificates) such round-off slides reach 8e-15 of ``1 + max |d|``
+      (planar), 4e-17 (exact) and 6e-16 (certificates), every real slide is aligned,
+      and ``1e-9`` leaves five orders of margin while still flagging a slide of 7e-5
+      against motions of order 1.
 
     Hand conditions (thesis eqs. hand_eq .. underactuation), for a grasp with ``J``, when
     ``actuator_forces`` ``f`` are given (``R`` defaults to the identity, ``commands`` ``f_c``
@@ -70,6 +90,12 @@ def model_residuals(
         res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - dn))))
         diss = np.einsum("ij,ij->i", ct, dt) + grasp.mu * cn * np.linalg.norm(dt, axis=1)
         res["max_dissipation"] = float(np.max(np.abs(diss)))
+        dtn = np.linalg.norm(dt, axis=1)
+        tol = SLIDE_TOL * (1.0 + float(np.max(np.abs(d), initial=0.0)))
+        slides = (dtn > tol) & (cn > 0.0)
+        u = dt[slides] / dtn[slides, None]
+        miss = ct[slides] + (grasp.mu[slides] * cn[slides])[:, None] * u
+        res["slide_alignment"] = float(np.max(np.linalg.norm(miss, axis=1), initial=0.0))
     if actuator_forces is not None and grasp.J is not None:
         f = np.asarray(actuator_forces, dtype=float)
         R = np.eye(grasp.J.shape[1]) if grasp.R is None else grasp.R
@@ -107,7 +133,9 @@ class Solution:
         Object motion ``r`` (planar ``(x, y, theta)``); virtual, since springs
         have unit stiffness. None where the method has no motion (``gws``).
     value : float or None
-        Optimisation queries: the optimum (MaxDisturbance: largest ``s``).
+        Optimisation queries: the optimum (MaxDisturbance: largest ``s``); set on every
+        stable answer, None on an unstable one (no ``s`` in ``[0, cap]`` holds; no
+        commands within the limits hold).
     states : (m,) array of str or None
         Per-contact state: planar ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``;
         the 3D MIP methods ``"stick"``, ``"slip"`` (tangential motion), ``"detach"``.
@@ -115,9 +143,12 @@ class Solution:
         At least ``time_s``; methods add counts (states visited, LPs solved, ...).
     status : str
         ``"solved"`` (``stable`` is the answer), ``"timeout"`` (the method's ``time_limit``
-        ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap) or
-        ``"error"`` (a backend failed; ``stats["message"]`` says why). Only ``"solved"``
-        carries an answer: the others have ``stable=None``.
+        ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap or
+        stopped where it cannot answer) or ``"error"`` (a backend failed, or the answer
+        lacked what it must carry); ``stats["message"]`` says why. Only ``"solved"``
+        carries an answer: the others have ``stable=None``. A stable answer of an
+        optimisation query (MaxDisturbance, OptimalCommands) always has a finite
+        ``value``: :func:`stability.solve` turns one without into ``"error"``.
     actuator_forces : (a,) array or None
         Hands: actuator forces ``f`` with ``J^T c = R f`` [N or N m].
     commands : (a,) array or None
@@ -134,8 +165,9 @@ class Solution:
         Hands: the joint motion ``q_ref`` where the nonbackdrivable actuators lock
         (``R^T (q - q_ref) >= 0``); None means 0 (commands and disturbance applied at once).
     conditions : tuple of str or None
-        The :func:`model_residuals` keys the method enforces, which :meth:`max_residual`
-        checks (None: all of them). A baseline that drops a condition (``no_mdp`` has no
+        The :func:`model_residuals` keys the method enforces (None: all of them), which
+        ``max_residual(enforced=True)`` checks; plain :meth:`max_residual` checks every
+        condition of the model. A baseline that drops a condition (``no_mdp`` has no
         maximum dissipation) still reports its residual, so the difference is visible.
     """
 
@@ -198,8 +230,33 @@ class Solution:
             self.hand_reference,
         )
 
-    def max_residual(self) -> float:
-        """Largest entry of :meth:`residuals` among the method's enforced ``conditions``."""
+    def max_residual(
+        self, conditions: Iterable[str] | None = None, *, enforced: bool = False
+    ) -> float:
+        """Largest entry of :meth:`residuals`: by default over *every* condition the model
+        states (all its keys), whatever the method enforces, so a method that drops one
+        (``no_mdp``: maximum dissipation; ``refinement``'s uncertified answer: the circular
+        cone, exceeded by at most ``stats["cone_excess_bound"]``, and maximum dissipation)
+        shows it here.
+
+        ``conditions``: only these keys (:data:`MODEL_CONDITIONS`; one that needs data the
+        answer lacks, e.g. ``spring_law`` without motion, is skipped). ``enforced=True``:
+        only the method's own :attr:`conditions` (what it promises; all of them when None).
+        Raises ``ValueError`` for an unknown key, for both arguments at once, or when none
+        of the asked conditions can be checked."""
+        if conditions is not None and enforced:
+            raise ValueError("max_residual: give conditions or enforced=True, not both")
         res = self.residuals()
-        keys = res if self.conditions is None else [k for k in self.conditions if k in res]
-        return max(res[k] for k in keys)
+        if enforced:
+            conditions = self.conditions
+        if conditions is None:
+            return max(res.values())
+        keys = (conditions,) if isinstance(conditions, str) else tuple(conditions)
+        bad = sorted(set(keys) - set(MODEL_CONDITIONS))
+        if bad:
+            raise ValueError(f"max_residual: unknown condition(s) {bad}; known: {MODEL_CONDITIONS}")
+        have = [res[k] for k in keys if k in res]
+        if not have:
+            raise ValueError(f"max_residual: none of {list(keys)} can be checked on this "
+                             f"answer (it has {sorted(res)})")  # fmt: skip
+        return max(have)

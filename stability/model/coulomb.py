@@ -41,9 +41,10 @@ __all__ = [
 
 def exact_conditions(eta: float) -> tuple[str, ...]:
     """The :func:`~stability.solution.model_residuals` keys an exact answer satisfies: all,
-    maximum dissipation included; with a normal uncertainty ``eta > 0`` the spring law of
-    the *nominal* normals is not what was solved, so not ``spring_law``."""
-    out = (*CONDITIONS, "max_dissipation")
+    maximum dissipation included, as a product (``max_dissipation``) and as friction aligned
+    against each slide (``slide_alignment``); with a normal uncertainty ``eta > 0`` the
+    spring law of the *nominal* normals is not what was solved, so not ``spring_law``."""
+    out = (*CONDITIONS, "max_dissipation", "slide_alignment")
     return out if eta == 0 else tuple(c for c in out if c != "spring_law")
 
 

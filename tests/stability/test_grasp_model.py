@@ -22,7 +22,8 @@ from stability import (
 from stability import planar as pl
 from stability.grasp import default_tangents
 
-FIVE_KEYS = {"equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation"}
+MOTION_KEYS = {"equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation",
+               "slide_alignment"}  # fmt: skip
 FORCE_KEYS = {"equilibrium", "normal_sign", "friction_cone"}
 
 
@@ -431,12 +432,12 @@ def test_residuals_of_unstable_answer_raise():
         gsol.residuals()
 
 
-def test_planar_residuals_have_five_keys_and_detect_tampering():
+def test_planar_residuals_have_the_motion_keys_and_detect_tampering():
     g = three()
     sol = solve(g, Existence(wrench=[0, 0.5, 0], preload=1.0), method="planar")
     assert sol.stable
     res = sol.residuals()
-    assert set(res) == FIVE_KEYS
+    assert set(res) == MOTION_KEYS
     assert max(res.values()) <= 1e-9, res
     assert sol.max_residual() == max(res.values())
 
@@ -454,12 +455,42 @@ def test_planar_residuals_have_five_keys_and_detect_tampering():
     assert moved.residuals()["spring_law"] > 0.05  # contacts 1 and 3 change d_n by 0.1
 
 
+def test_slide_alignment_sees_friction_misaligned_on_a_small_slide():
+    """Maximum dissipation as a force: friction 0.3 N inside the cone (mu c_n = 0.5 N) of a
+    contact that slides by 7e-5 passes the product residual (5.6e-5) and fails
+    ``slide_alignment`` by 0.8 N; aligned friction passes both; a round-off slide (1e-12)
+    is no slide. ``max_residual`` covers every condition, ``conditions`` picks some."""
+    from stability.solution import model_residuals
+
+    g = spatial()
+    r = np.zeros(6)
+    r[2] = 7e-5  # along z: tangential at contact 0 (normal -x)
+    d = (g.G.T @ r).reshape(3, 3)
+    u = d[0, 1:] / np.linalg.norm(d[0, 1:])
+    w = np.zeros(6)
+
+    def res(ct0, motion):
+        c = np.zeros((3, 3))
+        c[0] = [1.0, *ct0]
+        return model_residuals(g, -(g.G @ c.reshape(-1)), c, motion)
+
+    bad = res(0.3 * u, r)
+    assert bad["max_dissipation"] == pytest.approx(0.8 * 7e-5, rel=1e-6)
+    assert bad["slide_alignment"] == pytest.approx(0.8, rel=1e-9)
+    assert bad["friction_cone"] == 0.0 and bad["equilibrium"] <= 1e-15
+    good = res(-0.5 * u, r)
+    assert good["slide_alignment"] <= 1e-15 and good["max_dissipation"] <= 1e-15
+    assert res(0.3 * u, r * 1e-12 / 7e-5)["slide_alignment"] == 0.0  # round-off: no slide
+    sol = solve(g, Existence(wrench=w), method="gws")  # no motion: no slide_alignment key
+    assert "slide_alignment" not in sol.residuals()
+
+
 def test_max_disturbance_residuals_use_value_times_direction():
     sol = solve(three(), MaxDisturbance(direction=[0, 1, 0], preload=1.0), method="planar")
     assert sol.value == pytest.approx(1.0, abs=1e-9)
     np.testing.assert_allclose(sol.wrench, [0, sol.value, 0])
     res = sol.residuals()
-    assert set(res) == FIVE_KEYS and max(res.values()) <= 1e-9, res
+    assert set(res) == MOTION_KEYS and max(res.values()) <= 1e-9, res
     wrong = dataclasses.replace(sol, value=0.5)  # same forces, smaller wrench
     assert wrong.residuals()["equilibrium"] > 0.4
 
@@ -476,6 +507,35 @@ def test_gws_residuals_have_force_keys_only(grasp):
     forces = np.array(sol.forces, dtype=float, copy=True)
     forces[0, 0] += 0.1
     assert dataclasses.replace(sol, forces=forces).residuals()["equilibrium"] > 0.05
+
+
+def test_solve_turns_a_solved_answer_without_its_value_into_an_error():
+    """The one gate every method passes (``stability.solve``): a stable answer of an
+    optimisation query without a finite value, or "solved" without stable/unstable, is
+    status "error" with a message, never an answer."""
+    from stability import Solution, api
+
+    answers = {"stable": (True, None), "nan": (True, float("nan")), "none": (None, 1.0)}
+
+    @api.register("_broken", queries=(Existence, MaxDisturbance, OptimalCommands),
+                  planar=True, spatial=True, hand=True)  # fmt: skip
+    def _broken(grasp, query, answer="stable"):
+        stable, value = answers[answer]
+        return Solution(stable, "_broken", grasp, query, value=value)
+
+    try:
+        g = three()
+        for answer in answers:
+            for q in (MaxDisturbance(direction=[0, 1, 0]), OptimalCommands([0, 1, 0])):
+                sol = solve(g, q, method="_broken", answer=answer)
+                assert sol.status == "error" and sol.stable is None, (answer, q)
+                assert "_broken" in sol.stats["message"]
+        assert solve(g, Existence([0, 1, 0]), method="_broken").status == "solved"
+        assert solve(g, Existence([0, 1, 0]), method="_broken", answer="none").status == "error"
+    finally:
+        api._METHODS.pop("_broken")
+    ok = solve(g, MaxDisturbance(direction=[0, 1, 0], preload=1.0), method="planar")
+    assert ok.status == "solved" and ok.value == pytest.approx(1.0)
 
 
 # -- 5. available_methods -------------------------------------------------------------------

@@ -118,7 +118,18 @@ def test_wedge_no_mdp_creates_energy(backend):
     stored = 0.5 * float(np.sum(sol.forces[:, 0] ** 2))  # unit springs, no preload
     assert stored > 1.0 and work <= 1e-9 * stored
     assert res["max_dissipation"] > 1.0  # friction does not oppose the sliding
+    assert res["slide_alignment"] > 0.1  # ... as a force too
     assert abs(sol.motion[5]) > 0  # the virtual rotation that wedges it
+    # max_residual covers every condition of the model, the dropped ones included; the
+    # method's own promise is max_residual(enforced=True)
+    assert sol.max_residual() == max(res.values()) >= res["max_dissipation"]
+    assert sol.max_residual(enforced=True) <= TOL * (1 + np.abs(sol.forces).max())
+    assert sol.max_residual(["max_dissipation"]) == res["max_dissipation"]
+    assert sol.max_residual("spring_law") == res["spring_law"]
+    with pytest.raises(ValueError, match="unknown condition"):
+        sol.max_residual(["dissipation"])
+    with pytest.raises(ValueError, match="not both"):
+        sol.max_residual(["equilibrium"], enforced=True)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -279,6 +290,77 @@ def test_iteration_cap_is_a_status_not_a_guess():
     assert all(b <= a + 1e-12 for a, b in zip(nets, nets[1:], strict=False))  # descends
     capped = solve(P.pinch(), q, method="iterative", gamma=0.2, max_iter=10)
     assert capped.status == "not_converged" and capped.stable is None
+
+
+def _finger_grasp(points, normals, mu, levers) -> stability.Grasp:
+    """A grasp of ``examples.random_fingers``' kind: one single-joint finger per contact."""
+    J = np.zeros((9, 3))
+    for i, lever in enumerate(levers):
+        J[3 * i : 3 * i + 3, i] = lever
+    return stability.Grasp(points, normals, mu, J=J, R=np.eye(3))
+
+
+# random_fingers(default_rng(100), 3), the 6th grasp with balanced commands, the commands
+# scaled by U(0.5, 1.5) (an unbalanced hand)
+STALL = _finger_grasp(
+    [[0.041060003140630616, -0.014449969051880052, 0.02460232786732005],
+     [-0.028328832481151638, -0.03736217787096891, -0.017365048660828147],
+     [-0.03446571495678896, 0.009455903539013027, -0.03496713286470961]],
+    [[-0.8771207121379666, 0.12781613492995939, -0.4629495566367384],
+     [0.6844775285184296, 0.6766625641970934, 0.2713269009285975],
+     [0.6569966953478809, -0.10592153450683145, 0.7464154143837614]],
+    [0.544902954271998, 0.9176279732831323, 0.5570455845167634],
+    [[0.08744334292952993, 0.011884168252161924, -0.010273690236534296],
+     [0.041223482123624866, 0.02256634169723202, 0.0022178063263411673],
+     [0.0530137680051235, 0.004333350861338424, 0.0031775470063598412]],
+)  # fmt: skip
+STALL_COMMANDS = [0.24405324561828293, 0.03431292913724439, 0.05720861954124723]
+STALL_DIRECTION = [-0.37539751213102085, 0.8413813484396946, 0.38330975798793687,
+                   0.05336013832214345, 0.009198022210292481, -0.035997997729474554]  # fmt: skip
+
+
+def test_iterative_looks_down_the_ray_where_the_commanded_preload_stalls():
+    """The commands alone leave a net wrench of 0.0102 N that the scheme cannot reduce
+    within gamma: the hand follows the object at its commanded forces, so the net wrench is
+    the same all along the ray and the least-motion step is 0 ("converged", unstable). The
+    exact model holds the commands (the object moves by 1.8, a step of 180). It used to
+    answer "solved" with value None in 0.03 s; the look down the ray finds the equilibrium."""
+    q = MaxDisturbance(STALL_DIRECTION, commands=STALL_COMMANDS, cap=100.0)
+    sol = solve(STALL, q, method="iterative")
+    assert sol.status == "solved" and sol.stable and sol.value > 0.3  # refinement: 0.431
+    assert sol.stats["far_moves"] >= 1
+    assert sol.stats["preload_trace"][-1]["net"] < 1e-6
+    check_residuals(sol)
+    pre = solve(STALL, Existence(np.zeros(6), commands=STALL_COMMANDS), method="iterative")
+    assert pre.status == "solved" and pre.stable
+
+
+def test_iterative_gives_no_max_disturbance_from_an_unstable_preload():
+    """Commands that the grasp cannot hold alone (exact: s = 0 unstable) while the
+    disturbance along ``d`` is held up to the cap (exact 100): the scheme, which applies the
+    disturbance from the commands' equilibrium, says it has no answer instead of
+    "unstable" for every s (it used to: status "solved", value None)."""
+    g = _finger_grasp(
+        [[-0.016998040084154124, -0.003458233089067638, -0.04689463996235783],
+         [0.022914635472962293, 0.012193448801664048, 0.04273452102764761],
+         [0.04498009073133548, -0.01703819038148803, -0.013656189304670522]],
+        [[0.38870848720981427, 0.018269513582511557, 0.9211796441761596],
+         [-0.5532255444377313, -0.21359902365692346, -0.8051813175144993],
+         [-0.9423056292044965, 0.3187279793614226, 0.10233560642172751]],
+        [0.8091114491825875, 0.4585767045057795, 0.3562742055963973],
+        [[0.0867071891787016, -0.004462334516836372, -0.028047507929626524],
+         [0.08928278474656381, 0.0032910636428425894, 0.0019760046293048872],
+         [0.07373846881579325, 0.013837280766331743, 0.003210903430438472]],
+    )  # fmt: skip
+    f = [0.06663765023430937, 0.08977494126502132, 0.14718188539265256]
+    d = [0.8050488070443366, 0.4899387893322257, -0.33219516005733657, 0.035200153884361034,
+         -0.009976266359620992, -0.012814050674290716]  # fmt: skip
+    q = MaxDisturbance(d, commands=f, cap=100.0)
+    sol = solve(g, q, method="iterative")
+    assert sol.status == "not_converged" and sol.stable is None and sol.value is None
+    assert "commanded preload alone is unstable" in sol.stats["message"]
+    ex = solve(g, q, method="exact", time_limit=60)
+    assert ex.status == "solved" and ex.stable and ex.value == pytest.approx(100.0)
 
 
 def test_bad_input_gets_clear_errors():

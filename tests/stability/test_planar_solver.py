@@ -47,6 +47,7 @@ def test_thesis_table(w, P, stable, c1, c2, c3):
         "friction_cone",
         "spring_law",
         "max_dissipation",
+        "slide_alignment",
     }
     assert max(res.values()) <= 1e-9, res
 
