@@ -24,7 +24,9 @@ def test_torque_about_x_is_resisted(cube_grasp):
     sol = solve(cube_grasp, MaxDisturbance(tx, commands=cmd, cap=100), method="refinement",
                 backend="scip", time_limit=60)  # fmt: skip
     assert sol.stable and sol.value > 0.01
-    assert sol.max_residual(enforced=True) < 1e-6  # a relaxed answer: its enforced conditions
+    # an exact point: every condition, to 1.1e-6 N (friction against a slide of 170 force
+    # units; the model zeroes Jacobian round-off below 1e-7 relative: problem.CLEAN_RTOL)
+    assert sol.max_residual() < 1e-5
     # independent check: the exact Existence query holds at half the value
     half = solve(cube_grasp, Existence([0, 0, 0, 0.5 * sol.value, 0, 0], commands=cmd),
                  method="refinement", backend="scip")  # fmt: skip
