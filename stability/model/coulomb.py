@@ -279,10 +279,14 @@ def slide_search(
     angles start at ``x``'s slide directions and move by sequential linear programming: the
     LP linearised in ``delta_i`` about the last exact point (``c_t = -mu (c_n u +
     c_n^0 delta u_perp)``, ``d_t = sigma u + sigma^0 delta u_perp``) within a trust radius
-    ``|delta| <= rho``, then the exact LP at ``phi + delta``, accepted when its objective
-    does not get worse (else ``rho`` shrinks by 4). The least-motion point of the best LP
+    ``|delta| <= rho``, then the exact LP at ``phi + delta``, elastic in misaligned friction
+    (``c_t = -mu c_n u + e u_perp``, ``|e|`` penalised by :data:`ELASTIC_PENALTY` per
+    newton), accepted when that merit does not get worse (else ``rho`` shrinks by 4); then
+    up to :data:`RESTORE_STEPS` Newton steps (least ``|delta|`` that aligns friction to
+    first order) put the point back on the exact modes. A point counts as exact when its
+    misalignment is below ``1e-9 (1 + B)``. The least-motion point of the best one
     (:meth:`ExactProblem.tidy`) is returned, checked against the exact conditions within
-    ``1e-7 (1 + B)``; None if none was found."""
+    ``1e-7 (1 + B)`` (motions unboxed); None if none was found."""
     prob, g = ex.prob, ex.grasp
     M = prob.model
     c, dt = x[prob.c], x[ex.dt]
