@@ -104,7 +104,8 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
         raise GraspError("method 'exact' takes spatial grasps; use 'planar' for planar ones")
     data = QueryData.of(grasp, query, opts.bound_factor)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
-    stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": eta, "feastol": feastol}
+    stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": eta, "feastol": feastol,
+                             "gap": gap}  # fmt: skip
     bounds_stats(bounds, stats)
     conditions = exact_conditions(eta)
     t0 = time.perf_counter()
@@ -113,7 +114,7 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
     try:
         res = _run(ex, opts, feastol, gap, stats)
     except Stop as e:
-        return stopped("exact", grasp, query, stats, e)
+        return _bracket(stopped("exact", grasp, query, stats, e), data, stats.get("incumbent"))
     finally:
         stats["solve_time_s"] = time.perf_counter() - t0
     if res is None:
@@ -132,6 +133,31 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
                    conditions=conditions)  # fmt: skip
     if data.command_range is not None:
         sol.commands = pt.x[ex.prob.fc]
+    return _bracket(sol, data, value)
+
+
+def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
+    """``sol.lower``/``sol.upper`` of an optimisation query: the value of SCIP's (polished)
+    exact point on the feasible side, its dual bound on the other (MaxDisturbance: at most
+    the cap); ``stats["certified"]`` when they meet within the relative ``gap`` asked."""
+    bound = sol.stats.get("dual_bound")
+    if bound is not None and not math.isfinite(bound):
+        bound = None
+    if data.direction is not None:
+        hi = None if bound is None else min(float(bound), data.cap)
+        if hi is not None and value is not None:
+            hi = max(hi, value)
+        sol.lower, sol.upper = value, hi
+    elif data.command_range is not None:
+        lo = None if bound is None else float(bound)
+        if lo is not None and value is not None:
+            lo = min(lo, value)
+        sol.lower, sol.upper = lo, value
+    else:
+        return sol
+    if sol.lower is not None and sol.upper is not None:
+        width = sol.upper - sol.lower
+        sol.stats["certified"] = width <= sol.stats["gap"] * max(abs(sol.upper), 1e-12) + 1e-9
     return sol
 
 

@@ -111,3 +111,15 @@ def test_solved_always_has_a_value(bench_a) -> None:
             sol = solve(g, MaxDisturbance(d, commands=f, cap=100.0), method=method)
             if sol.status == "solved" and sol.stable:
                 assert sol.value is not None, (method, sol.stats)
+
+
+def test_exact_brackets_its_answer() -> None:
+    """``exact``: its polished point on the feasible side, SCIP's dual bound on the other,
+    closed within its gap (the pinch's 2 mu tau / lever and the smallest commands)."""
+    g = ex.pinch()
+    up = [0, 0, 1, 0, 0, 0]
+    s = solve(g, MaxDisturbance(up, commands=[0.1, 0.1]), method="exact")
+    assert s.lower == s.value == pytest.approx(ex.PINCH_MAX_Z, rel=1e-6)
+    assert s.lower <= s.upper <= s.lower * (1 + 1e-4) and s.stats["certified"]
+    s = solve(g, OptimalCommands([0, 0, 2.0, 0, 0, 0]), method="exact")
+    assert s.lower <= s.value == s.upper and s.stats["certified"]
