@@ -527,9 +527,8 @@ def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any,
     None when it has none. Contacts with friction on the cone's boundary slide along
     ``x``'s motion (``source="motion"``: ``u = d_t / |d_t|`` where the contact clearly
     moves) or against its friction (``"force"``: ``u = -c_t / |c_t|``); SCIP's two differ by
-    its tolerance, which one of them may not absorb. ``"relaxation"``: every contact that
-    moves at all slides along ``x``'s motion, whatever its friction (a relaxation's friction
-    only lies in the motion's sector)."""
+    its tolerance, which one of them may not absorb. (A relaxation's answer is made exact
+    by :func:`certify` instead, whose slide directions are variables.)"""
     prob, g = ex.prob, ex.grasp
     M = prob.model
     lp = M.fixed(x)
@@ -558,14 +557,6 @@ def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any,
                     slide(i, dt[i] / nd)
                 else:
                     fix((*ex.dt[i], ex.slide[i]))
-        elif source == "relaxation" and nd > dscale:  # the relaxation's slide
-            slide(i, dt[i] / nd)
-            for t in range(2):  # c_t = -mu c_n u
-                lp.add_row([ti[t], ci], [1.0, mu * float(dt[i, t] / nd)], 0.0, 0.0)
-        elif source == "relaxation":  # sticks, friction anywhere in an inscribed polygon
-            fix((*ex.dt[i], ex.slide[i]))
-            phi = math.atan2(c[i, 2], c[i, 1]) if nt > fscale else 0.0
-            inscribed_friction(lp, ti, ci, mu, phi)
         elif nt >= (1.0 - 1e-4) * mu * cn:  # on the boundary: slides along u (or is about to)
             moves = nd > 1e3 * dscale
             u = dt[i] / nd if source == "motion" and moves else -c[i, 1:] / nt
