@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, Query
 
-__all__ = ["MODEL_CONDITIONS", "SLIDE_TOL", "Solution", "model_residuals"]
+__all__ = ["MODEL_CONDITIONS", "SLIDE_TOL", "Solution", "model_residuals", "slide_alignment"]
 
 # every key model_residuals can return, in its order
 MODEL_CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation",
@@ -90,12 +90,7 @@ def model_residuals(
         res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - dn))))
         diss = np.einsum("ij,ij->i", ct, dt) + grasp.mu * cn * np.linalg.norm(dt, axis=1)
         res["max_dissipation"] = float(np.max(np.abs(diss)))
-        dtn = np.linalg.norm(dt, axis=1)
-        tol = SLIDE_TOL * (1.0 + float(np.max(np.abs(d), initial=0.0)))
-        slides = (dtn > tol) & (cn > 0.0)
-        u = dt[slides] / dtn[slides, None]
-        miss = ct[slides] + (grasp.mu[slides] * cn[slides])[:, None] * u
-        res["slide_alignment"] = float(np.max(np.linalg.norm(miss, axis=1), initial=0.0))
+        res["slide_alignment"] = slide_alignment(grasp.mu, c, d)
     if actuator_forces is not None and grasp.J is not None:
         f = np.asarray(actuator_forces, dtype=float)
         R = np.eye(grasp.J.shape[1]) if grasp.R is None else grasp.R
@@ -111,6 +106,22 @@ def model_residuals(
             both = np.minimum(np.maximum(f - fc, 0.0), np.maximum(v, 0.0))
             res["actuator_complementarity"] = float(np.max(both, initial=0.0))
     return res
+
+
+def slide_alignment(
+    mu: NDArray[np.float64], forces: NDArray[np.float64], motion: NDArray[np.float64]
+) -> float:
+    """The ``slide_alignment`` residual of :func:`model_residuals`: ``max |c_t + mu c_n
+    d_t / |d_t||`` [N] over the contacts with ``c_n > 0`` and ``|d_t| > SLIDE_TOL (1 +
+    max |d|)``, 0 when none slides; ``forces`` and contact ``motion`` ``d`` are (m, k)."""
+    c, d = np.asarray(forces, dtype=float), np.asarray(motion, dtype=float)
+    cn, ct, dt = c[:, 0], c[:, 1:], d[:, 1:]
+    dtn = np.linalg.norm(dt, axis=1)
+    tol = SLIDE_TOL * (1.0 + float(np.max(np.abs(d), initial=0.0)))
+    slides = (dtn > tol) & (cn > 0.0)
+    u = dt[slides] / dtn[slides, None]
+    miss = ct[slides] + (np.asarray(mu, dtype=float)[slides] * cn[slides])[:, None] * u
+    return float(np.max(np.linalg.norm(miss, axis=1), initial=0.0))
 
 
 @dataclass
