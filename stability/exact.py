@@ -21,7 +21,8 @@ eq. mdp). SCIP handles the cones as convex and the bilinear row by spatial branc
 bounds: forces from :func:`~stability.model.problem.scale_bounds` (``|c_t| <= mu B``), tangential
 motions ``|d_t| <= motion_bound * 2 B`` (the same box as ``refinement``'s edge weights),
 translations within that, rotations within it over the grasp's size ``L`` and joint
-motions within it over their lever; an answer at the box is flagged ``stats["at_bound"]``.
+motions within it over their lever; an answer at the box is flagged ``stats["at_bound"]``
+and, for an optimisation query, solved again in a larger box ("The box" below).
 
 Queries: ``Existence``, ``MaxDisturbance`` (maximise ``s``), ``OptimalCommands`` (the
 objectives and limits of ``refinement``), all in one solve. Options: ``time_limit`` (a
@@ -100,7 +101,25 @@ more than the gap; a fitted optimum below the checked first point by more than
 ``RECHECK_RTOL``; the ``status="error"`` above) shows SCIP pruning wrongly on this very
 query, so its dual bound proves nothing there: ``upper`` is None and ``certified`` False.
 Without one the bracket is SCIP's, as before the rechecks; seed 84 shows that a dual
-bound can be wrong, so ``certified`` is "SCIP's bound met", not a proof.
+bound can be wrong, so ``certified`` is "SCIP's bound met", not a proof. A time-out's
+feasible side is SCIP's incumbent only where its point, polished, passes the same checks
+(``stats["incumbent_checked"]``); otherwise that side is None.
+
+The box. Every bound above holds for motions inside the box (``bound_factor``, default
+:data:`EXACT_BOUND_FACTOR` = 100 times the force scale). An optimisation answer whose
+motion reaches it (``stats["box_reached"]``: a tangential, object or joint motion at 99 %
+of its bound) may have been cut off there: the box grows tenfold and the query is solved
+again, at most :data:`BOX_RETRIES` times within the same time limit
+(``stats["box_enlarged"]`` lists the solves). A larger box's answer replaces the smaller's
+when it is solved; a time-out or an error there leaves the answer found. An answer (or a
+time-out's checked incumbent) still at its box has no dual-bound side (MaxDisturbance
+``upper``, OptimalCommands ``lower`` None) and is not certified. Measured on a benchmark
+grasp ((a), an OptimalCommands of ``python -m stability.bench grasps --directions 3
+--wrenches 3``): in the box of 100 SCIP timed out at 60 s and 150 s with an incumbent of
+0.32924 and a dual bound of 0.32902, where ``refinement``'s exact point costs 0.328696
+with a joint motion of 2.4e4 force units; in the box of 1e3 ``exact`` gives 0.328697 in 12
+s, with a motion at that box too. A larger default box is slower where it does not bind
+(three other queries of that grasp and of (d): 2.5-4x), hence 100 and the retries.
 """
 
 from __future__ import annotations
@@ -127,6 +146,8 @@ from .solution import Solution, slide_alignment
 __all__: list[str] = []
 
 _EXACT_OPTIONS = ("normal_uncertainty", "motion_bound", "feastol", "gap", "recheck", "presolve")
+EXACT_BOUND_FACTOR = 100.0  # the default box (bound_factor); enlarged where an answer reaches it
+BOX_RETRIES = 2  # tenfold enlargements of the box when the answer's motion reaches it
 # MaxDisturbance rechecks (module docstring): the fitted box's smallest cap, as a fraction
 # of the query's, and the relative difference reported as a disagreement
 RECHECK_FLOOR = 1e-3
@@ -143,6 +164,44 @@ RECHECK_RTOL = 1e-3
     "globally by SCIP's spatial branch-and-bound: the accuracy reference for small grasps",
 )
 def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
+    # The box (bound_factor times the force scale, default EXACT_BOUND_FACTOR): an answer
+    # whose motion reaches it may have been cut off there; the box then grows tenfold and
+    # the query is solved again, at most BOX_RETRIES times within the same time limit
+    # (module docstring, "The box").
+    t0 = time.perf_counter()
+    limit = options.get("time_limit")
+    options.setdefault("bound_factor", EXACT_BOUND_FACTOR)
+    factor = float(options["bound_factor"])
+    grown: list[str] = []
+    sol = _solve_once(grasp, query, **options)
+    for _ in range(BOX_RETRIES):
+        optimisation = isinstance(query, MaxDisturbance | OptimalCommands)
+        if sol.status != "solved" or not sol.stats.get("box_reached") or not optimisation:
+            break  # (an Existence point is exact wherever it lies)
+        factor *= 10.0
+        left = None if limit is None else float(limit) - (time.perf_counter() - t0)
+        if left is not None and left <= 0.0:
+            grown.append(f"bound_factor {factor:g}: no time left")
+            break
+        retry = _solve_once(grasp, query, **{**options, "bound_factor": factor,
+                                              "time_limit": left})  # fmt: skip
+        grown.append(f"bound_factor {factor:g}: {retry.status}, value {retry.value}")
+        if retry.status != "solved" or retry.value is None:
+            break  # (a time-out or an error in the larger box: the answer found stands)
+        sol = retry
+    if grown:
+        sol.stats["box_enlarged"] = grown
+    if sol.stats.get("box_reached") and sol.status in ("solved", "timeout"):
+        # the dual bound holds only within the box, which the answer reaches: none given
+        if isinstance(query, MaxDisturbance):
+            sol.upper, sol.stats["certified"] = None, False
+        elif isinstance(query, OptimalCommands):
+            sol.lower, sol.stats["certified"] = None, False
+    return sol
+
+
+def _solve_once(grasp: Grasp, query: Any, **options: Any) -> Solution:
+    """One solve of the query in the box of ``options["bound_factor"]``."""
     got = {k: options.pop(k) for k in list(options) if k in _EXACT_OPTIONS}
     eta = float(got.get("normal_uncertainty", 0.0))
     if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
@@ -182,7 +241,10 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
         if res is not None and data.direction is not None and recheck:
             ex, var, res, data = _recheck(data, ex, var, res, *args, stats)
     except Stop as e:
-        return _bracket(stopped("exact", grasp, query, stats, e), data, stats.get("incumbent"))
+        # a time-out's incumbent is on the feasible side only if its point passed the
+        # exact conditions (_run: stats["incumbent_checked"])
+        inc = stats.get("incumbent") if stats.get("incumbent_checked") else None
+        return _bracket(stopped("exact", grasp, query, stats, e), data, inc)
     finally:
         stats["solve_time_s"] = time.perf_counter() - t0
     if res is None:
@@ -190,10 +252,8 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
             stats["capped"] = False
         return solution("exact", grasp, query, False, stats, conditions=conditions)
     pt = ex.prob.point(res)
-    M = ex.prob.model
-    motion = np.r_[ex.dt.reshape(-1), ex.prob.r, [] if ex.prob.q is None else ex.prob.q]
-    box = np.array([M.ub[int(j)] for j in motion])
-    pt.at_bound = pt.at_bound or bool(np.any(np.abs(res[motion.astype(int)]) >= 0.99 * box))
+    stats["box_reached"] = reached = _box_reached(ex, res)
+    pt.at_bound = pt.at_bound or reached
     value = query_value(ex, pt, var, data)
     if data.direction is not None:
         stats["capped"] = value >= data.cap * (1 - 1e-8)
@@ -348,30 +408,52 @@ def _run(ex: CoulombModel, opts: MipOptions, feastol: float, gap: float, recheck
         return None
     if res.status == "timeout":
         stats["incumbent"] = res.objective
+        stats["incumbent_checked"] = False
+        if res.x is not None:  # the incumbent's point, polished and checked like an optimum
+            try:
+                x = _checked(ex, polish(ex, res.x, gap, {}), stats={})
+                stats["incumbent_checked"] = True
+                stats["box_reached"] = _box_reached(ex, x)
+            except Stop:
+                pass
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached ({res.message}; "
                    f"incumbent {res.objective}, dual bound {res.bound})")  # fmt: skip
     if res.status == "optimal" and res.x is not None:
-        x = polish(ex, res.x, gap, stats)
-        viol = ex.violations(x)
-        stats["violations"] = viol
-        # force conditions within 1e-6 of the force bound; dissipation (force x motion)
-        # within that times the motion's scale
-        B = ex.prob.bounds.force
-        dmax = 1.0 + float(np.abs(x[ex.dt]).max(initial=0.0))
-        lim = {k: 1e-6 * (1.0 + B) * (dmax if k == "dissipation" else 1.0) for k in viol}
-        bad = {k: v for k, v in viol.items() if v > lim[k]}
-        # maximum dissipation as a force (slide_alignment of model_residuals), reported,
-        # not enforced: an unpolished point can slide contacts by SCIP's tolerance with
-        # friction inside the cone (module docstring, "Unpolished points")
-        g, pt = ex.grasp, ex.prob.point(x)
-        d = g.G.T @ pt.motion
-        if g.J is not None and pt.hand_motion is not None:
-            d = d - g.J @ pt.hand_motion
-        viol["alignment"] = slide_alignment(g.mu, pt.forces, d.reshape(g.m, g.dim))
-        if bad:
-            raise Stop("error", f"SCIP's answer fails the exact conditions {bad}")
-        return x
+        return _checked(ex, polish(ex, res.x, gap, stats), stats)
     raise Stop("error", f"scip: {res.status}: {res.message}")
+
+
+def _box_reached(ex: CoulombModel, x: NDArray[np.float64]) -> bool:
+    """A tangential, object or joint motion of ``x`` at 99 % of its bound in the box."""
+    M = ex.prob.model
+    motion = np.r_[ex.dt.reshape(-1), ex.prob.r, [] if ex.prob.q is None else ex.prob.q]
+    box = np.array([M.ub[int(j)] for j in motion])
+    return bool(np.any(np.abs(x[motion.astype(int)]) >= 0.99 * box))
+
+
+def _checked(ex: CoulombModel, x: NDArray[np.float64],
+             stats: dict[str, Any]) -> NDArray[np.float64]:  # fmt: skip
+    """``x`` if it passes the exact conditions (``stats["violations"]``); :class:`Stop`
+    ``"error"`` otherwise."""
+    viol = ex.violations(x)
+    stats["violations"] = viol
+    # force conditions within 1e-6 of the force bound; dissipation (force x motion)
+    # within that times the motion's scale
+    B = ex.prob.bounds.force
+    dmax = 1.0 + float(np.abs(x[ex.dt]).max(initial=0.0))
+    lim = {k: 1e-6 * (1.0 + B) * (dmax if k == "dissipation" else 1.0) for k in viol}
+    bad = {k: v for k, v in viol.items() if v > lim[k]}
+    # maximum dissipation as a force (slide_alignment of model_residuals), reported,
+    # not enforced: an unpolished point can slide contacts by SCIP's tolerance with
+    # friction inside the cone (module docstring, "Unpolished points")
+    g, pt = ex.grasp, ex.prob.point(x)
+    d = g.G.T @ pt.motion
+    if g.J is not None and pt.hand_motion is not None:
+        d = d - g.J @ pt.hand_motion
+    viol["alignment"] = slide_alignment(g.mu, pt.forces, d.reshape(g.m, g.dim))
+    if bad:
+        raise Stop("error", f"SCIP's answer fails the exact conditions {bad}")
+    return x
 
 
 def _scip(ex: CoulombModel, opts: MipOptions, time_limit: float | None, feastol: float,

@@ -39,6 +39,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--backends", default=None,
                     help="grasps: more MIP backends for refinement, comma-separated "
                     "(e.g. gurobi)")  # fmt: skip
+    ap.add_argument("--levels", type=int, default=None,
+                    help="grasps: refinement's levels q for this run's variants (default 9: "
+                    "2048 equivalent edges)")  # fmt: skip
     ap.add_argument(
         "--skip-default",
         action="store_true",

@@ -113,8 +113,10 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
 def bench_grasps(
     directions: int = 10, wrenches: int = 10, time_limit: float = 60.0, seed: int = SEED,
     only: str | None = None, progress: bool = True, backend: str | None = None,
+    levels: int | None = None,
 ) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per solve: grasp, contacts, task, time_s, status, answer, bracket."""
+    """One row per solve: grasp, contacts, task, time_s, status, answer, bracket. With
+    ``levels`` (refinement's ``q``; default 9) the variant is named ``"... q<levels>"``."""
     from tqdm import tqdm
 
     rows: list[dict[str, Any]] = []
@@ -130,11 +132,14 @@ def bench_grasps(
                   for _ in range(wrenches)]  # fmt: skip
         for task, q in tasks:
             t0 = time.perf_counter()
-            opts = {} if backend is None else {"backend": backend}
+            opts: dict[str, Any] = {} if backend is None else {"backend": backend}
+            if levels is not None:
+                opts["levels"] = levels
             sol = solve(g, q, method="refinement", time_limit=time_limit, **opts)
             t = time.perf_counter() - t0
             ans = sol.value if task != "check" else sol.stable
-            rows.append({"variant": backend or "default", "grasp": label, "contacts": g.m,
+            variant = (backend or "default") + ("" if levels is None else f" q{levels}")
+            rows.append({"variant": variant, "grasp": label, "contacts": g.m,
                          "task": task, "time_s": round(t, 4), "status": sol.status,
                          "answer": ans, "lower": sol.lower, "upper": sol.upper,
                          "rounds": len(sol.stats.get("rounds", [])),
@@ -312,16 +317,19 @@ def chart(summ: list[dict[str, Any]], path: Path) -> Path:
 def cli(args: argparse.Namespace) -> None:
     """``python -m stability.bench grasps``: options ``--directions``, ``--wrenches``,
     ``--time-limit`` (default 60 s), ``--only``, ``--out``, ``--baseline REV``,
-    ``--backends`` (comma-separated, beside the default)."""
+    ``--backends`` (comma-separated, beside the default), ``--levels`` (refinement's ``q``
+    for this run's variants, not the baseline's)."""
     limit = args.time_limit or 60.0
     base = None
     if getattr(args, "baseline", None):
         base = baseline(args.baseline, args)
     rows = []
+    lv = getattr(args, "levels", None)
     if not getattr(args, "skip_default", False):
-        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only)
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, levels=lv)
     for b in [b for b in (getattr(args, "backends", None) or "").split(",") if b]:
-        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b)
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b,
+                             levels=lv)  # fmt: skip
     if base is not None:
         proc, out, _ = base
         proc.wait()

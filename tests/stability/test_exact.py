@@ -253,3 +253,50 @@ def test_a_disagreement_withdraws_the_upper_bound() -> None:
     assert (agreed.lower, agreed.upper, agreed.stats["certified"]) == (0.25, 0.25, True)
     refuted = bracket({"first": 0.2, "solves": [], "disagreement": True})
     assert (refuted.lower, refuted.upper, refuted.stats["certified"]) == (0.25, None, False)
+
+
+# ------------------------------------------------------- the box (stability/exact.py)
+
+
+def test_an_answer_at_the_box_is_solved_again_in_a_larger_one() -> None:
+    """The tendon finger along +z with a box of 1 (bound_factor) times the force scale: the
+    answer's slide reaches the box, so the query is solved again in a box of 10, where
+    the optimum lies inside (0.48917, as with bound_factor 3 and refinement) and SCIP's
+    bound closes the bracket."""
+    g = examples.tendon_finger()
+    q = MaxDisturbance(Z, commands=1.0)
+    sol = solve(g, q, method="exact", bound_factor=1.0, time_limit=120)
+    assert sol.status == "solved"
+    assert len(sol.stats["box_enlarged"]) == 1 and "bound_factor 10" in sol.stats["box_enlarged"][0]
+    assert not sol.stats["box_reached"] and sol.stats["certified"]
+    assert sol.lower == sol.value <= sol.upper
+    ref = solve(g, q, method="refinement")
+    assert sol.value == pytest.approx(ref.value, rel=1e-4)
+    _exact_check(sol, tol=1e-6)
+
+
+def test_the_box_loop_keeps_its_answer_and_withdraws_the_bound(monkeypatch) -> None:
+    """The loop of stability/exact.py ("The box") on scripted solves: a first answer at its
+    box is solved again tenfold larger; a time-out there leaves the first answer, which
+    (still at its box) gets no upper bound and is not certified."""
+    import stability.exact as exact_mod
+    from stability.solution import Solution
+
+    g = examples.pinch()
+    q = MaxDisturbance(Z, commands=[0.1, 0.1])
+    factors = []
+
+    def once(grasp, query, **options):
+        factors.append(options["bound_factor"])
+        if len(factors) == 1:
+            stats = {"box_reached": True, "certified": True, "gap": 1e-4}
+            return Solution(True, "exact", grasp, query, value=1.0, stats=stats, lower=1.0,
+                            upper=1.0)  # fmt: skip
+        return Solution(None, "exact", grasp, query, status="timeout", stats={})
+
+    monkeypatch.setattr(exact_mod, "_solve_once", once)
+    sol = solve(g, q, method="exact", time_limit=5.0)
+    assert factors == [100.0, 1000.0]
+    assert sol.status == "solved" and sol.value == 1.0
+    assert sol.upper is None and sol.lower == 1.0 and sol.stats["certified"] is False
+    assert "timeout" in sol.stats["box_enlarged"][0]
