@@ -12,9 +12,10 @@ HiGHS has neither indicator nor SOS constraints, so :func:`reformulate` turns a
   ceil(log2(n - 1))`` binaries ``y`` spell a segment in a reflected Gray code ``G(s) = s xor
   (s >> 1)``; for each bit ``l``, the members all of whose segments have bit ``l`` = 1 sum to
   at most ``U1 y_l`` and those whose segments all have it 0 to at most ``U0 (1 - y_l)``
-  (``U`` the sum of the members' upper bounds). Consecutive Gray codes differ in one bit, so
-  exactly the two members of the chosen segment stay free (Vielma and Nemhauser, Math.
-  Program. 128, 2011).
+  (``U`` the members' fixed sum where a row fixes it, else the sum of their upper
+  bounds; :func:`stability.mip.model.add_log_sos2`, shared with the SCIP backend).
+  Consecutive Gray codes differ in one bit, so exactly the two members of the chosen
+  segment stay free (Vielma and Nemhauser, Math. Program. 128, 2011).
 
 Every "optimal" answer is checked against the model's exact conditions before it is
 returned (:func:`stability.mip.solve`).
@@ -31,7 +32,7 @@ import numpy as np
 
 from .._lp import quiet_highs
 from ..errors import ModelError
-from .model import INF, MipModel
+from .model import INF, MipModel, add_log_sos2
 
 __all__ = ["reformulate", "solve_highs"]
 
@@ -72,36 +73,13 @@ def reformulate(model: MipModel) -> MipModel:
             else:  # a.x - M z <= b
                 out.add_row(idx, np.append(a, -big_m), -INF, b, ind.name)
     for s in model.sos2:
-        n = len(s.idx)
-        if n <= 2:
+        if len(s.idx) <= 2:
             continue
-        lb, ub = np.asarray(model.lb)[s.idx], np.asarray(model.ub)[s.idx]
-        if np.any(lb < 0) or not np.all(np.isfinite(ub)):
+        if not add_log_sos2(out, model, s):
             raise ModelError(
                 f"{model.name}: SOS2 {s.name} needs members with 0 <= lb and finite ub "
                 "(HiGHS backend's logarithmic encoding)"
             )
-        segments = n - 1
-        bits = max(1, math.ceil(math.log2(segments)))
-        gray = [g ^ (g >> 1) for g in range(segments)]
-        y = out.add_vars(bits, 0, 1, "B", f"{s.name}.y")
-        for bit in range(bits):
-            ones, zeros = [], []
-            for j in range(n):
-                segs = [g for g in (j - 1, j) if 0 <= g < segments]
-                b = [(gray[g] >> bit) & 1 for g in segs]
-                if all(b):
-                    ones.append(j)
-                elif not any(b):
-                    zeros.append(j)
-            if ones:  # sum(lambda[ones]) <= U1 y
-                u1 = float(ub[ones].sum())
-                out.add_row(np.append(s.idx[ones], y[bit]), np.append(np.ones(len(ones)), -u1),
-                            -INF, 0.0, f"{s.name}.L{bit}")  # fmt: skip
-            if zeros:  # sum(lambda[zeros]) <= U0 (1 - y)
-                u0 = float(ub[zeros].sum())
-                out.add_row(np.append(s.idx[zeros], y[bit]), np.append(np.ones(len(zeros)), u0),
-                            -INF, u0, f"{s.name}.R{bit}")  # fmt: skip
     out.objective = np.zeros(out.n_vars)
     out.objective[: model.n_vars] = model.objective
     out.maximize, out.offset = model.maximize, model.offset

@@ -339,3 +339,56 @@ class MipModel:
             f"{kinds['I']} integer), {len(self.rows)} rows, {len(self.indicators)} indicators, "
             f"{len(self.sos2)} SOS2 sets"
         )
+
+
+def sos2_total(model: MipModel, s: Sos2) -> float | None:
+    """``T`` where a row of ``model`` fixes ``sum x[s.idx] = T`` (its members, one equal
+    coefficient each, no other variable; refinement's ``sum z = 1``); None if none does."""
+    members = set(int(j) for j in s.idx)
+    for r in model.rows:
+        if r.lo != r.hi or len(r.idx) != len(members) or set(int(j) for j in r.idx) != members:
+            continue
+        v = float(r.val[0])
+        if v != 0.0 and np.all(r.val == v):
+            return float(r.lo) / v
+    return None
+
+
+def add_log_sos2(out: MipModel, model: MipModel, s: Sos2) -> bool:
+    """Add to ``out`` the logarithmic encoding of ``model``'s SOS2 set ``s`` (Vielma and
+    Nemhauser, Math. Program. 128, 2011): ``k = ceil(log2(n - 1))`` binaries ``y`` spell
+    the chosen segment (members ``s``, ``s + 1``) in a reflected Gray code ``G(s) = s xor
+    (s >> 1)``; per bit ``l`` the members all of whose segments have bit ``l`` = 1 sum to at
+    most ``U y_l`` and those whose segments all have it 0 to at most ``U (1 - y_l)``.
+    ``U`` is the members' fixed sum where a row fixes it (:func:`sos2_total`; the encoding
+    is then the ideal one of the convex-combination SOS2), else the sum of their upper
+    bounds. Needs members with ``0 <= lb`` and finite ``ub``; returns False (nothing added)
+    otherwise. Consecutive Gray codes differ in one bit, so exactly the two members of the
+    chosen segment stay free."""
+    n = len(s.idx)
+    lb, ub = np.asarray(model.lb)[s.idx], np.asarray(model.ub)[s.idx]
+    if np.any(lb < 0) or not np.all(np.isfinite(ub)):
+        return False
+    total = sos2_total(model, s)
+    segments = n - 1
+    bits = max(1, math.ceil(math.log2(segments)))
+    gray = [g ^ (g >> 1) for g in range(segments)]
+    y = out.add_vars(bits, 0, 1, "B", f"{s.name}.y")
+    for bit in range(bits):
+        ones, zeros = [], []
+        for j in range(n):
+            segs = [g for g in (j - 1, j) if 0 <= g < segments]
+            b = [(gray[g] >> bit) & 1 for g in segs]
+            if all(b):
+                ones.append(j)
+            elif not any(b):
+                zeros.append(j)
+        if ones:  # sum(lambda[ones]) <= U1 y
+            u1 = float(ub[ones].sum()) if total is None else min(total, float(ub[ones].sum()))
+            out.add_row(np.append(s.idx[ones], y[bit]), np.append(np.ones(len(ones)), -u1),
+                        -INF, 0.0, f"{s.name}.L{bit}")  # fmt: skip
+        if zeros:  # sum(lambda[zeros]) <= U0 (1 - y)
+            u0 = float(ub[zeros].sum()) if total is None else min(total, float(ub[zeros].sum()))
+            out.add_row(np.append(s.idx[zeros], y[bit]), np.append(np.ones(len(zeros)), u0),
+                        -INF, u0, f"{s.name}.R{bit}")  # fmt: skip
+    return True

@@ -223,7 +223,10 @@ def test_refinement_max_disturbance_agrees_with_scip():
     sol = solve_grasp(g, q, method="refinement", backend="gurobi", time_limit=120)
     assert ref.status == sol.status == "solved", (ref.stats, sol.stats)
     assert sol.stable == ref.stable
-    assert sol.value == pytest.approx(ref.value, rel=1e-6)
+    # both are exact points (lower bounds) under their relaxation's bound: each backend's
+    # value lies under the other's bound, and they agree within the bracket's 1e-4
+    assert ref.value <= sol.upper * (1 + 1e-9) and sol.value <= ref.upper * (1 + 1e-9)
+    assert sol.value == pytest.approx(ref.value, rel=1e-4)
     assert sol.stats["mips"] >= 1
 
 
