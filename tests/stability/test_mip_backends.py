@@ -274,3 +274,58 @@ def test_big_m_needs_finite_bounds_but_scip_does_not():
     assert r.optimal and r.objective == pytest.approx(1.0)
     with pytest.raises(ModelError, match="time_limit"):
         solve(m, "scip", time_limit=-1)
+
+
+@pytest.mark.parametrize("log_sos2", [True, False])
+def test_convex_combination_sos2_against_brute_force(monkeypatch, log_sos2):
+    """SOS2 sets whose members sum to a fixed total (refinement's ``sum z = 1``: the encoding
+    then uses that total as its big-U, stability.mip.model.sos2_total), on random models:
+    SCIP encoded (its default) and with its own SOS2 handler, and HiGHS, all against
+    enumeration of the segments."""
+    import stability.mip._scip as scip_backend
+
+    monkeypatch.setattr(scip_backend, "LOG_SOS2", log_sos2)
+    rng = np.random.default_rng(31)
+    optimal = 0
+    for _ in range(25):
+        m = MipModel("convex")
+        x = m.add_vars(2, -4.0, 4.0, name="x")
+        n = int(rng.integers(4, 10))
+        lam = m.add_vars(n, 0.0, 1.0, name="lam")
+        m.add_sos2(lam)
+        m.add_constraint(lam, 1.0, "==", 1.0)  # a convex combination
+        pts = rng.normal(size=(n, 2)) * 3.0
+        for t in range(2):  # x = sum lam_j p_j: a point on the polyline p_0 .. p_{n-1}
+            m.add_constraint(np.append(lam, x[t]), np.append(pts[:, t], -1.0), "==", 0.0)
+        a = rng.normal(size=2)
+        m.add_constraint(x, a, "<=", float(rng.uniform(-1.0, 2.0)))
+        m.set_objective(x, rng.normal(size=2), maximize=bool(rng.integers(0, 2)))
+        status, best = brute_force(m)
+        optimal += status == "optimal"
+        for backend in BACKENDS:
+            r = solve(m, backend)
+            assert r.status == status or (
+                status == "infeasible" and r.status == "infeasible_or_unbounded"
+            ), (backend, r.status)
+            if status == "optimal":  # (HiGHS: 1e-6 off, its integrality tolerance)
+                assert r.objective == pytest.approx(best, abs=1e-5), backend
+    assert optimal >= 15
+
+
+def test_scip_keeps_its_own_sos2_where_the_encoding_cannot_go():
+    """Members with an infinite upper bound have no big-U: SCIP states that set with its SOS2
+    handler (HiGHS refuses it), and the answer still keeps two adjacent members."""
+    from stability.mip._scip import _log_sos2
+
+    m = MipModel("unbounded")
+    lam = m.add_vars(4, 0.0, math.inf, name="lam")
+    m.add_sos2(lam)
+    m.add_constraint(lam, 1.0, "<=", 5.0)
+    m.set_objective(lam, [1.0, 0.0, 3.0, 2.0], maximize=True)  # best pair: members 2, 3
+    enc, native = _log_sos2(m)
+    assert len(native) == 1 and enc.n_vars == m.n_vars
+    r = solve(m, "scip")
+    assert r.optimal and r.objective == pytest.approx(15.0)
+    assert np.count_nonzero(r.x[lam] > 1e-9) <= 2
+    with pytest.raises(ModelError, match="finite ub"):
+        solve(m, "highs")
