@@ -42,6 +42,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--levels", type=int, default=None,
                     help="grasps: refinement's levels q for this run's variants (default 9: "
                     "2048 equivalent edges)")  # fmt: skip
+    ap.add_argument("--merge", nargs="+", default=None, metavar="CSV",
+                    help="grasps: no run; summarise and chart the rows of these earlier "
+                    "runs' grasps.csv files together (time-outs at --time-limit)")  # fmt: skip
     ap.add_argument(
         "--skip-default",
         action="store_true",

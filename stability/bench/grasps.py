@@ -247,6 +247,25 @@ def read_baseline(out: Path, rev: str) -> list[dict[str, Any]]:
     return rows
 
 
+def read_rows(path: Path) -> list[dict[str, Any]]:
+    """The rows of a ``grasps.csv`` this benchmark wrote (``--merge``), typed as written."""
+
+    def num(v: str) -> float | None:
+        return None if v in ("", "None") else float(v)
+
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            typed = {
+                "contacts": int(r["contacts"]),
+                "time_s": float(r["time_s"]),
+                "lower": num(r.get("lower", "")),
+                "upper": num(r.get("upper", "")),
+            }
+            rows.append({**r, **typed})
+    return rows
+
+
 def by_contacts(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any]]:
     """Per variant, contact count and task: median and worst time (time-outs and errors
     at the limit), time-outs, answered share and closed-bracket share."""
@@ -318,8 +337,19 @@ def cli(args: argparse.Namespace) -> None:
     """``python -m stability.bench grasps``: options ``--directions``, ``--wrenches``,
     ``--time-limit`` (default 60 s), ``--only``, ``--out``, ``--baseline REV``,
     ``--backends`` (comma-separated, beside the default), ``--levels`` (refinement's ``q``
-    for this run's variants, not the baseline's)."""
+    for this run's variants, not the baseline's), ``--merge CSV ...`` (no run: the rows of
+    earlier runs' ``grasps.csv`` files, summarised and charted together into ``--out``)."""
     limit = args.time_limit or 60.0
+    if getattr(args, "merge", None):  # earlier runs' rows, summarised and charted together
+        rows = [r for path in args.merge for r in read_rows(Path(path))]
+        summ = by_contacts(rows, limit)
+        print_by_contacts(summ)
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        csv_path = write_csv(Path(args.out) / "grasps.csv", rows)
+        write_csv(Path(args.out) / "grasps_summary.csv", summ)
+        png = chart(summ, Path(args.out) / "grasps.png")
+        print(f"wrote {csv_path}, grasps_summary.csv and {png}")
+        return
     base = None
     if getattr(args, "baseline", None):
         base = baseline(args.baseline, args)

@@ -68,6 +68,25 @@ def test_grasps(tmp_path) -> None:
     assert [r["task"] for r in rows] == ["check", "max_disturbance", "optimal_commands"]
     assert {r["grasp"] for r in rows} == {"a"} and {r["contacts"] for r in rows} == {"3"}
     assert rows[0]["status"] == "solved" and rows[0]["certified"] in ("True", "False", "")
+    # --merge: no run; this run's rows and a copy under another variant name, summarised and
+    # charted together (the docs' table combines runs so)
+    other = tmp_path / "other"
+    other.mkdir()
+    with (other / "grasps.csv").open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows({**r, "variant": "copy", "time_s": "99"} for r in rows)
+    merged = tmp_path / "merged"
+    main(["grasps", "--merge", str(tmp_path / "grasps.csv"), str(other / "grasps.csv"),
+          "--time-limit", "60", "--out", str(merged)])  # fmt: skip
+    summ = _rows(merged / "grasps_summary.csv")
+    tasks = ("check", "max_disturbance", "optimal_commands")
+    assert [(r["variant"], r["task"]) for r in summ] == [
+        (v, t) for v in ("default", "copy") for t in tasks
+    ]
+    # the copy's 99 s counts at the 60 s limit only when it is not solved
+    assert all(float(r["median_s"]) == 99.0 for r in summ if r["variant"] == "copy")
+    assert (merged / "grasps.png").stat().st_size > 0 and len(_rows(merged / "grasps.csv")) == 6
 
 
 def test_tradeoff(tmp_path, monkeypatch) -> None:
