@@ -45,12 +45,8 @@ def reformulate(model: MipModel) -> MipModel:
     original variables keep their indices; the encoding's binaries are appended)."""
     if not model.indicators and not model.sos2:  # an LP or a plain MIP: nothing to add
         return model
-    out = MipModel(model.name + " (big-M, log SOS2)")
     # the variables and rows as they are (already checked by the model): copied, not re-added
-    out.lb, out.ub = list(model.lb), list(model.ub)
-    out.kind, out.var_names = list(model.kind), list(model.var_names)
-    out.objective = np.zeros(model.n_vars)
-    out.rows = list(model.rows)
+    out = model.plain(model.name + " (big-M, log SOS2)")
     for ind in model.indicators:
         for a, b in ind.as_le():  # z = active => a.x <= b
             _, top = model.activity_bounds(ind.idx, a)
@@ -80,8 +76,7 @@ def reformulate(model: MipModel) -> MipModel:
                 f"{model.name}: SOS2 {s.name} needs members with 0 <= lb and finite ub "
                 "(HiGHS backend's logarithmic encoding)"
             )
-    out.objective = np.zeros(out.n_vars)
-    out.objective[: model.n_vars] = model.objective
+    out.objective[: model.n_vars] = model.objective  # (the encoding's binaries: 0)
     out.maximize, out.offset = model.maximize, model.offset
     return out
 

@@ -120,10 +120,7 @@ def _log_sos2(model: MipModel) -> tuple[MipModel, list[Any]]:
     that the encoding cannot take: a negative lower or an infinite upper bound)."""
     if not model.sos2:
         return model, []
-    out = MipModel(model.name)
-    out.lb, out.ub = list(model.lb), list(model.ub)
-    out.kind, out.var_names = list(model.kind), list(model.var_names)
-    out.rows = list(model.rows)
+    out = model.plain(model.name)
     native = [s for s in model.sos2 if len(s.idx) > 2 and not add_log_sos2(out, model, s)]
     return out, native
 

@@ -302,6 +302,17 @@ class MipModel:
             out["sos2"] = max(out["sos2"], float(rest.max(initial=0.0)))
         return out
 
+    def plain(self, name: str) -> MipModel:
+        """A new model with this one's variables and rows (copied lists, rows shared: they
+        are immutable) and a zero objective; no indicators, SOS2 sets or flags. The same
+        indices: callers add rows, binaries (appended) or fix bounds on it."""
+        out = MipModel(name)
+        out.lb, out.ub = list(self.lb), list(self.ub)
+        out.kind, out.var_names = list(self.kind), list(self.var_names)
+        out.rows = list(self.rows)
+        out.objective = np.zeros(self.n_vars)
+        return out
+
     def fixed(self, x: ArrayLike) -> MipModel:
         """The LP left when the integer variables are fixed at ``round(x)``: indicators whose
         binary is at its active value become rows, the others are dropped, and SOS2 members
@@ -309,11 +320,8 @@ class MipModel:
         same indices: a solution of it satisfies this model's conditions exactly (up to the LP
         solver's tolerance), which is how a big-M answer is polished."""
         x = np.asarray(x, dtype=float)
-        out = MipModel(self.name + " (integers fixed)")
-        out.lb, out.ub = list(self.lb), list(self.ub)
+        out = self.plain(self.name + " (integers fixed)")
         out.kind = ["C"] * self.n_vars
-        out.var_names = list(self.var_names)
-        out.rows = list(self.rows)
         for j, k in enumerate(self.kind):
             if k != "C":
                 out.lb[j] = out.ub[j] = float(np.round(x[j]))
