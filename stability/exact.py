@@ -173,9 +173,9 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
     options.setdefault("bound_factor", EXACT_BOUND_FACTOR)
     factor = float(options["bound_factor"])
     grown: list[str] = []
+    optimisation = isinstance(query, MaxDisturbance | OptimalCommands)
     sol = _solve_once(grasp, query, **options)
     for _ in range(BOX_RETRIES):
-        optimisation = isinstance(query, MaxDisturbance | OptimalCommands)
         if sol.status != "solved" or not sol.stats.get("box_reached") or not optimisation:
             break  # (an Existence point is exact wherever it lies)
         factor *= 10.0
@@ -447,10 +447,8 @@ def _checked(ex: CoulombModel, x: NDArray[np.float64],
     # not enforced: an unpolished point can slide contacts by SCIP's tolerance with
     # friction inside the cone (module docstring, "Unpolished points")
     g, pt = ex.grasp, ex.prob.point(x)
-    d = g.G.T @ pt.motion
-    if g.J is not None and pt.hand_motion is not None:
-        d = d - g.J @ pt.hand_motion
-    viol["alignment"] = slide_alignment(g.mu, pt.forces, d.reshape(g.m, g.dim))
+    d = g.contact_motion(pt.motion, pt.hand_motion)
+    viol["alignment"] = slide_alignment(g.mu, pt.forces, d)
     if bad:
         raise Stop("error", f"SCIP's answer fails the exact conditions {bad}")
     return x

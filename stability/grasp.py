@@ -282,6 +282,17 @@ class Grasp:
             raise GraspError(f"{name} must be >= 0, got {arr.tolist()}")
         return arr
 
+    def contact_motion(
+        self, motion: ArrayLike, hand_motion: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
+        """Per contact, the object's motion relative to the hand in the contact frame,
+        ``d = G^T r - J q`` (``J q`` only with a hand and ``hand_motion``): (m, dim),
+        normal first; ``d_n > 0`` separates."""
+        d = self._G.T @ np.asarray(motion, dtype=float)
+        if hand_motion is not None and self._J is not None:
+            d = d - self._J @ np.asarray(hand_motion, dtype=float)
+        return d.reshape(self.m, self.dim)
+
     def wrench(self, value: ArrayLike, name: str = "wrench") -> NDArray[np.float64]:
         """Validate a wrench of this grasp's dimension."""
         arr = _as_finite(name, value)

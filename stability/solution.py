@@ -81,10 +81,7 @@ def model_residuals(
         "friction_cone": float(np.max(np.maximum(0.0, ctn - grasp.mu * cn))),
     }
     if motion is not None:
-        d = grasp.G.T @ np.asarray(motion, dtype=float)
-        if hand_motion is not None and grasp.J is not None:
-            d = d - grasp.J @ hand_motion
-        d = d.reshape(grasp.m, k)
+        d = grasp.contact_motion(motion, hand_motion)
         dn, dt = d[:, 0], d[:, 1:]
         p = np.zeros(grasp.m) if preload is None else preload
         res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - dn))))

@@ -455,11 +455,7 @@ class ExactProblem:
     def states(self, pt: ExactPoint, tol: float = 1e-9) -> NDArray[np.str_]:
         """Per contact: ``"detach"`` (open), ``"stick"`` (closed, no tangential motion) or
         ``"slip"`` (closed, ``|d_t| > tol (1 + |d|)``)."""
-        g = self.grasp
-        d = g.G.T @ pt.motion
-        if g.J is not None and pt.hand_motion is not None:
-            d = d - g.J @ pt.hand_motion
-        d = d.reshape(g.m, g.dim)
+        d = self.grasp.contact_motion(pt.motion, pt.hand_motion)
         slide = np.linalg.norm(d[:, 1:], axis=1) > tol * (1.0 + np.abs(d).max(initial=0.0))
         out = np.where(slide, "slip", "stick")
         return np.where(pt.closed, out, "detach")
