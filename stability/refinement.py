@@ -67,7 +67,12 @@ last round's MIP dual bound (containment: it bounds every finer level). A first 
 point has every contact sticking and every actuator locked (one LP). ``Existence``
 answers "stable" only with an exact point and "unstable" only with an infeasible
 relaxation (a proof); a feasible finest relaxation without an exact point is
-``status="not_converged"``. The loop stops once the bracket is closed to ``certify_gap``
+``status="not_converged"``. An optimisation query whose rounds end with no exact point
+probes (:func:`_probe`): a MaxDisturbance asks ``Existence`` at its bound (the cap when
+the bound reaches it) and just below; without an exact point from them it is
+``status="not_converged"`` with no value and only the relaxation's side of the bracket
+(``stats["relaxed_value"]``), never the relaxation's value as "solved" (``certify=False``
+asks for exactly that: the relaxation's answer, ``certified`` False). The loop stops once the bracket is closed to ``certify_gap``
 (default 1e-4 relative, ``stats["certified"]``) or at the finest level; a time-out keeps
 the bracket reached. Each round searches only the window between the best exact value
 and the last bound, and stops within ``ROUND_GAP * certify_gap`` of its optimum.
@@ -322,6 +327,7 @@ def _clock(stats: dict[str, Any], key: str, t0: float) -> None:
 
 
 def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
+    asked = dict(options)  # for the Existence probes (_probe)
     ro = _Opts.pop(options)
     opts = MipOptions.of(method, options)
     data = QueryData.of(grasp, query, opts.bound_factor)
@@ -419,10 +425,24 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                            "(no exact point) nor unstable (no proof)")  # fmt: skip
         return solution(method, grasp, query, None, stats, status="not_converged",
                         conditions=conditions)  # fmt: skip
-    # an optimisation query without an exact point: the relaxation's answer, flagged
     stats["cone_excess"] = rel.cone_excess(pt)
     stats["certified"] = False
     value = query_value(rel, pt, var, data)
+    if ro.certify:  # an optimisation query without an exact point: probe, or no answer
+        stats["relaxed_value"] = value
+        if data.direction is not None:
+            got = _probe(grasp, query, data, relaxed, cap0, ro, asked, opts, stats)
+            if got is not None:
+                return got
+        stats["reason"] = (
+            "the relaxation is solved at the finest level, but no exact solution was found "
+            "with its contact modes" + (" nor by Existence probes at and below its bound"
+                                        if data.direction is not None else "")
+            + f": the optimum is bracketed on one side only (relaxation {value:.9g}, "
+            "stats['relaxed_value'])")  # fmt: skip
+        return _bracket(solution(method, grasp, query, None, stats, status="not_converged",
+                                 conditions=conditions), None, relaxed, data)  # fmt: skip
+    # certify=False: the relaxation's answer as asked, flagged uncertified
     if data.direction is not None:
         stats["capped"] = value >= cap0 * (1 - 1e-8)
     sol = solution(method, grasp, query, True, stats, rel.prob, pt, value, conditions=conditions)
@@ -432,6 +452,65 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
             np.any(sol.commands >= 0.99 * data.command_range[1]) and query.upper is None
         )
     return _bracket(sol, None, relaxed, data)
+
+
+PROBE_BACKOFF = (0.5, 10.0, 100.0)  # Existence probes at bound * (1 - k * certify_gap)
+PROBE_GAP_FLOOR = 1e-6  # the probes' relative back-off when certify_gap is 0
+_PROFILE_KEYS = ("build_time_s", "mip_time_s", "round_time_s", "certify_time_s", "nodes",
+                 "mips")  # the probes' work, added to the query's profile
+
+
+def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float | None,
+           cap0: float, ro: _Opts, asked: dict[str, Any], opts: MipOptions,
+           stats: dict[str, Any]) -> Solution | None:  # fmt: skip
+    """A MaxDisturbance whose rounds found no exact point (the relaxation's modes admit
+    none): ``Existence`` of the load ``base + s direction`` at the cap (when the bound
+    reaches it), then at ``s = bound (1 - k gap)`` for ``k`` in :data:`PROBE_BACKOFF`.
+    The first one answered "stable" (with its exact point) is the answer: ``value =
+    lower = s``, ``upper`` the relaxation's bound, certified when ``s`` is within
+    ``certify_gap`` of it. None when no probe holds within the time left.
+
+    Measured on the grasps benchmark (``python -m stability.bench grasps``): grasp (b),
+    direction 7, bound at the cap 100: the rounds' modes gave no exact point, Existence
+    at 100 is stable (0.24 s); grasp (h), direction 9, bound 0.5562691: Existence at the
+    bound less 5e-5 gave none (3.6 s), less 1e-3 is stable (0.7 s)."""
+    if relaxed is None:
+        return None
+    base = np.zeros_like(data.direction) if data.base is None else data.base
+    gap = max(ro.certify_gap, PROBE_GAP_FLOOR)
+    top = min(relaxed, cap0)
+    loads = [cap0] if relaxed >= cap0 * (1 - 1e-8) else []
+    loads += [top * (1.0 - k * gap) for k in PROBE_BACKOFF if top * (1.0 - k * gap) > 0]
+    tried: list[dict[str, Any]] = []
+    stats["probes"] = tried
+    for s in loads:
+        left = opts.remaining()
+        if left is not None and left <= 0.0:
+            break
+        sub = {**asked, "time_limit": left, "certify": True}
+        check = Existence(base + s * data.direction, preload=query.preload,
+                          commands=query.commands)  # fmt: skip
+        t0 = time.perf_counter()
+        try:
+            esol = _solve(grasp, check, "refinement", **sub)
+        except _BoxCut:  # the probe's box cut its optimum off: not this load
+            tried.append({"load": s, "status": "box", "time_s": time.perf_counter() - t0})
+            continue
+        tried.append({"load": s, "status": esol.status, "stable": esol.stable,
+                      "time_s": time.perf_counter() - t0})  # fmt: skip
+        for k in _PROFILE_KEYS:
+            if isinstance(esol.stats.get(k), int | float):
+                stats[k] = stats.get(k, 0) + esol.stats[k]
+        if esol.stable:
+            stats["certified"] = _closed(s, relaxed, data, ro.certify_gap)
+            stats["cone_excess"] = 0.0
+            stats["exact_value"] = s
+            stats["capped"] = s >= cap0 * (1 - 1e-8)
+            stats["at_bound"] = esol.stats.get("at_bound")
+            stats.pop("reason", None)
+            sol = dataclasses.replace(esol, query=query, value=s, stats=stats)
+            return _bracket(sol, (None, None, s), relaxed, data)
+    return None
 
 
 def _dual_bound(value: float | None, bound: float | None, data: QueryData) -> float | None:

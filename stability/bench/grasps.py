@@ -113,15 +113,16 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
 def bench_grasps(
     directions: int = 10, wrenches: int = 10, time_limit: float = 60.0, seed: int = SEED,
     only: str | None = None, progress: bool = True, backend: str | None = None,
-    levels: int | None = None,
+    levels: int | None = None, queries: set[tuple[str, str, int]] | None = None,
 ) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per solve: grasp, contacts, task, time_s, status, answer, bracket. With
-    ``levels`` (refinement's ``q``; default 9) the variant is named ``"... q<levels>"``."""
+    """One row per solve: grasp, contacts, task, its index ``k`` within the task, time_s,
+    status, answer, bracket. With ``levels`` (refinement's ``q``; default 9) the variant is
+    named ``"... q<levels>"``; with ``queries`` (``(grasp, task, k)``) only those run."""
     from tqdm import tqdm
 
     rows: list[dict[str, Any]] = []
     items = [x for x in grasps(seed) if only is None or x[0] in only]
-    total = len(items) * (1 + directions + wrenches)
+    total = len(items) * (1 + directions + wrenches) if queries is None else len(queries)
     bar = tqdm(total=total, desc="grasps", disable=not progress)
     for label, g, f in items:
         rng = np.random.default_rng(seed * 1000 + ord(label))
@@ -130,7 +131,11 @@ def bench_grasps(
                   for _ in range(directions)]  # fmt: skip
         tasks += [("optimal_commands", OptimalCommands(ex.random_wrench(rng)))
                   for _ in range(wrenches)]  # fmt: skip
+        seen: dict[str, int] = {}
         for task, q in tasks:
+            k = seen[task] = seen.get(task, -1) + 1
+            if queries is not None and (label, task, k) not in queries:
+                continue
             t0 = time.perf_counter()
             opts: dict[str, Any] = {} if backend is None else {"backend": backend}
             if levels is not None:
@@ -140,7 +145,7 @@ def bench_grasps(
             ans = sol.value if task != "check" else sol.stable
             variant = (backend or "default") + ("" if levels is None else f" q{levels}")
             rows.append({"variant": variant, "grasp": label, "contacts": g.m,
-                         "task": task, "time_s": round(t, 4), "status": sol.status,
+                         "task": task, "k": k, "time_s": round(t, 4), "status": sol.status,
                          "answer": ans, "lower": sol.lower, "upper": sol.upper,
                          "rounds": len(sol.stats.get("rounds", [])),
                          "certified": sol.stats.get("certified"),
@@ -248,22 +253,50 @@ def read_baseline(out: Path, rev: str) -> list[dict[str, Any]]:
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows of a ``grasps.csv`` this benchmark wrote (``--merge``), typed as written."""
+    """The rows of a ``grasps.csv`` this benchmark wrote (``--merge``), typed as written; a
+    file from before the ``k`` column gets it from the rows' order (the benchmark's)."""
 
     def num(v: str) -> float | None:
         return None if v in ("", "None") else float(v)
 
     rows = []
+    seen: dict[tuple[str, str, str], int] = {}
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
+            key = (r["variant"], r["grasp"], r["task"])
+            seen[key] = seen.get(key, -1) + 1
             typed = {
                 "contacts": int(r["contacts"]),
+                "k": int(r["k"]) if r.get("k") not in (None, "") else seen[key],
                 "time_s": float(r["time_s"]),
                 "lower": num(r.get("lower", "")),
                 "upper": num(r.get("upper", "")),
             }
             rows.append({**r, **typed})
     return rows
+
+
+def merge_rows(files: list[Path]) -> list[dict[str, Any]]:
+    """The rows of ``files`` in order; a row of a later file replaces the earlier one of the
+    same variant, grasp, task and ``k`` (a query re-run after a change to its code path)."""
+    merged: dict[tuple[str, str, str, int], dict[str, Any]] = {}
+    for path in files:
+        for r in read_rows(path):
+            merged[(r["variant"], r["grasp"], r["task"], r["k"])] = r
+    return list(merged.values())
+
+
+def parse_queries(text: str | None) -> set[tuple[str, str, int]] | None:
+    """``--queries 'h:max_disturbance:9,b:check:0'`` as ``{(grasp, task, k)}``."""
+    if not text:
+        return None
+    out = set()
+    for item in text.split(","):
+        parts = item.strip().split(":")
+        if len(parts) != 3 or parts[1] not in ("check", "max_disturbance", "optimal_commands"):
+            raise SystemExit(f"--queries: want grasp:task:index, got {item!r}")
+        out.add((parts[0], parts[1], int(parts[2])))
+    return out
 
 
 def by_contacts(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any]]:
@@ -341,7 +374,7 @@ def cli(args: argparse.Namespace) -> None:
     earlier runs' ``grasps.csv`` files, summarised and charted together into ``--out``)."""
     limit = args.time_limit or 60.0
     if getattr(args, "merge", None):  # earlier runs' rows, summarised and charted together
-        rows = [r for path in args.merge for r in read_rows(Path(path))]
+        rows = merge_rows([Path(p) for p in args.merge])
         summ = by_contacts(rows, limit)
         print_by_contacts(summ)
         Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -355,11 +388,13 @@ def cli(args: argparse.Namespace) -> None:
         base = baseline(args.baseline, args)
     rows = []
     lv = getattr(args, "levels", None)
+    qs = parse_queries(getattr(args, "queries", None))
     if not getattr(args, "skip_default", False):
-        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, levels=lv)
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, levels=lv,
+                             queries=qs)  # fmt: skip
     for b in [b for b in (getattr(args, "backends", None) or "").split(",") if b]:
         rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b,
-                             levels=lv)  # fmt: skip
+                             levels=lv, queries=qs)  # fmt: skip
     if base is not None:
         proc, out, _ = base
         proc.wait()

@@ -58,6 +58,11 @@ def _one(g, q, levels: int, refine: bool, eta: float, time_limit: float) -> dict
     sol = solve(g, q, method="refinement", levels=levels, refine=refine,
                 normal_uncertainty=eta, time_limit=time_limit)  # fmt: skip
     t = time.perf_counter() - t0
+    if sol.status == "not_converged" and "relaxed_value" in sol.stats:
+        # no exact point with this level's modes (a coarse level, typically): the table is
+        # the relaxation's value per level, as the thesis' is
+        return {"value": sol.stats["relaxed_value"], "time_s": round(t, 3),
+                "rounds": sol.stats.get("mip_rounds")}  # fmt: skip
     if sol.status != "solved":
         return {"value": sol.status, "time_s": round(t, 3)}
     v = sol.value if sol.stable else 0.0

@@ -87,6 +87,20 @@ def test_grasps(tmp_path) -> None:
     # the copy's 99 s counts at the 60 s limit only when it is not solved
     assert all(float(r["median_s"]) == 99.0 for r in summ if r["variant"] == "copy")
     assert (merged / "grasps.png").stat().st_size > 0 and len(_rows(merged / "grasps.csv")) == 6
+    # --queries: one query re-run; merged after the full run, its row replaces the old one
+    again = tmp_path / "again"
+    main(["grasps", "--queries", "a:check:0", "--directions", "1", "--wrenches", "1",
+          "--time-limit", "60", "--out", str(again)])  # fmt: skip
+    one = _rows(again / "grasps.csv")
+    assert [(r["grasp"], r["task"], r["k"]) for r in one] == [("a", "check", "0")]
+    both = tmp_path / "both"
+    main(["grasps", "--merge", str(tmp_path / "grasps.csv"), str(again / "grasps.csv"),
+          "--time-limit", "60", "--out", str(both)])  # fmt: skip
+    rows2 = _rows(both / "grasps.csv")
+    assert [(r["task"], r["k"]) for r in rows2] == [(r["task"], r["k"]) for r in rows]
+    assert rows2[0]["time_s"] == one[0]["time_s"] and rows2[1]["time_s"] == rows[1]["time_s"]
+    with pytest.raises(SystemExit, match="grasp:task:index"):
+        main(["grasps", "--queries", "a:nothing:0", "--out", str(again)])
 
 
 def test_tradeoff(tmp_path, monkeypatch) -> None:

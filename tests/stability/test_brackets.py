@@ -123,3 +123,51 @@ def test_exact_brackets_its_answer() -> None:
     assert s.lower <= s.upper <= s.lower * (1 + 1e-4) and s.stats["certified"]
     s = solve(g, OptimalCommands([0, 0, 2.0, 0, 0, 0]), method="exact")
     assert s.lower <= s.value == s.upper and s.stats["certified"]
+
+
+def _bench_direction(label: str, k: int):
+    """The benchmark's grasp ``label``, its commands and its ``k``-th max-disturbance
+    direction (as ``python -m stability.bench grasps`` draws them)."""
+    g, f = next((g, f) for lab, g, f in grasps() if lab == label)
+    rng = np.random.default_rng(7 * 1000 + ord(label))
+    ex.random_wrench(rng)  # the check's wrench
+    dirs = [_unit(rng) for _ in range(k + 1)]
+    return g, f, dirs[k]
+
+
+def test_probe_finds_an_exact_point_the_rounds_missed() -> None:
+    """Bench grasp (b), direction 7: the relaxation reaches the cap at every level and its
+    modes admit no exact point; the Existence probe at the cap holds (an exact point), so
+    the answer is the cap, bracketed on both sides, and its point passes residuals()."""
+    g, f, d = _bench_direction("b", 7)
+    sol = solve(g, MaxDisturbance(d, commands=f, cap=100.0), method="refinement")
+    assert sol.status == "solved" and sol.stats["probes"], sol.stats.get("reason")
+    assert sol.stats["probes"][-1]["stable"] is True
+    assert sol.lower == sol.value == pytest.approx(100.0) and sol.upper == pytest.approx(100.0)
+    assert sol.stats["capped"] and sol.stats["certified"]
+    # the point is exact for the wrench s * d: every condition, alignment included
+    assert sol.max_residual() < 1e-6 * (1.0 + sol.stats["force_bound"])
+    check = solve(g, Existence(sol.value * np.asarray(d), commands=f), method="refinement")
+    assert check.stable is True
+
+
+def test_no_exact_point_is_not_a_solved_answer() -> None:
+    """Bench grasp (d), direction 3: the relaxation reaches the cap at every level, but no
+    exact point is found, by the rounds or by the probes: not converged, no value, the
+    relaxation's bound kept as ``upper``. ``exact`` answers 100 there with a point whose
+    friction is 28 N off its slide: it keeps its value but withdraws ``lower``."""
+    g, f, d = _bench_direction("d", 3)
+    q = MaxDisturbance(d, commands=f, cap=100.0)
+    sol = solve(g, q, method="refinement")
+    assert sol.status == "not_converged" and sol.value is None and sol.stable is None
+    assert sol.lower is None and sol.upper == pytest.approx(100.0)
+    assert sol.stats["relaxed_value"] == pytest.approx(100.0)
+    assert all(p["stable"] is not True for p in sol.stats["probes"])
+    # the relaxation alone, as asked (certify=False), still answers with its value
+    rel = solve(g, q, method="refinement", certify=False)
+    assert rel.status == "solved" and rel.value == pytest.approx(100.0)
+    assert rel.stats["certified"] is False
+    s = solve(g, q, method="exact")
+    assert s.status == "solved" and s.value == pytest.approx(100.0)
+    assert s.max_residual() > 1.0  # slide_alignment
+    assert s.lower is None and s.stats["certified"] is False and s.stats["inexact_point"]
