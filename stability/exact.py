@@ -298,8 +298,10 @@ def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
     if align is not None and align > ALIGN_RTOL * (1.0 + sol.stats["force_bound"]):
         # the point slides a contact with friction off its slide: not an exact point, so
         # its value bounds nothing (module docstring, "Unpolished points")
-        sol.stats["inexact_point"] = (f"friction {align:.3g} N off a contact's slide "
-                                      "(slide_alignment): the feasible side is withdrawn")
+        sol.stats["inexact_point"] = (
+            f"friction {align:.3g} N off a contact's slide "
+            "(slide_alignment): the feasible side is withdrawn"
+        )
         if data.direction is not None:
             sol.lower = None
         else:

@@ -72,7 +72,8 @@ probes (:func:`_probe`): a MaxDisturbance asks ``Existence`` at its bound (the c
 the bound reaches it) and just below; without an exact point from them it is
 ``status="not_converged"`` with no value and only the relaxation's side of the bracket
 (``stats["relaxed_value"]``), never the relaxation's value as "solved" (``certify=False``
-asks for exactly that: the relaxation's answer, ``certified`` False). The loop stops once the bracket is closed to ``certify_gap``
+asks for exactly that: the relaxation's answer, ``certified`` False). The loop stops
+once the bracket is closed to ``certify_gap``
 (default 1e-4 relative, ``stats["certified"]``) or at the finest level; a time-out keeps
 the bracket reached. Each round searches only the window between the best exact value
 and the last bound, and stops within ``ROUND_GAP * certify_gap`` of its optimum.
@@ -456,8 +457,14 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
 
 PROBE_BACKOFF = (0.5, 10.0, 100.0)  # Existence probes at bound * (1 - k * certify_gap)
 PROBE_GAP_FLOOR = 1e-6  # the probes' relative back-off when certify_gap is 0
-_PROFILE_KEYS = ("build_time_s", "mip_time_s", "round_time_s", "certify_time_s", "nodes",
-                 "mips")  # the probes' work, added to the query's profile
+_PROFILE_KEYS = (
+    "build_time_s",
+    "mip_time_s",
+    "round_time_s",
+    "certify_time_s",
+    "nodes",
+    "mips",
+)  # the probes' work, added to the query's profile
 
 
 def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float | None,

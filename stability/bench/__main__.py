@@ -47,8 +47,9 @@ def parser() -> argparse.ArgumentParser:
                     "runs' grasps.csv files together (time-outs at --time-limit)")  # fmt: skip
     ap.add_argument("--queries", default=None, metavar="LIST",
                     help="grasps: run only these queries, comma-separated "
-                    "grasp:task:index (e.g. 'h:max_disturbance:9'; index from 0 within the "
-                    "task); with --merge, a later file's row replaces an earlier one's")  # fmt: skip
+                    "grasp:task:index (e.g. 'h:max_disturbance:9'; index from 0 within "
+                    "the task); with --merge, a later file's row replaces an earlier "
+                    "one's")  # fmt: skip
     ap.add_argument(
         "--skip-default",
         action="store_true",
