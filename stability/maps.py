@@ -47,7 +47,8 @@ class ResistibleMap:
 
     ``angles`` [rad] measured from the plane's first axis towards its second;
     ``magnitudes`` [N]: the largest resistible force per direction (0 where
-    even an infinitesimal force is not resisted); ``capped``: True where the
+    even an infinitesimal force is not resisted, NaN where the method gave no
+    answer: a time-out, not converged, an error); ``capped``: True where the
     search stopped at ``cap`` (resists *at least* ``cap``).
     """
 
@@ -102,7 +103,10 @@ def resistible_forces(
     for k in it:
         q = MaxDisturbance(direction=D[k], preload=preload, commands=commands, cap=cap)
         sol = solve(grasp, q, method=method, **options)
-        mags[k] = sol.value if sol.stable and sol.value is not None else 0.0
+        if sol.status != "solved":  # no answer is not "not resisted"
+            mags[k] = np.nan
+        else:
+            mags[k] = sol.value if sol.stable and sol.value is not None else 0.0
         capped[k] = bool(sol.stats.get("capped", False))
     return ResistibleMap(angles, mags, capped, float(cap), plane, method)
 
@@ -111,7 +115,7 @@ def plot_resistible(ax: Any, rmap: ResistibleMap, title: str = "", color: str = 
     """Draw a map on a matplotlib polar axis; capped directions are hatched (">= cap")."""
     th = np.r_[rmap.angles, rmap.angles[:1]]
     r = np.r_[rmap.magnitudes, rmap.magnitudes[:1]]
-    ax.fill(th, r, color=color, alpha=0.35, lw=0)
+    ax.fill(th, np.nan_to_num(r), color=color, alpha=0.35, lw=0)  # (a gap where unanswered)
     ax.plot(th, r, color=color, lw=1.5)
     if rmap.capped.any():
         cap_r = np.where(np.r_[rmap.capped, rmap.capped[:1]], rmap.cap, np.nan)

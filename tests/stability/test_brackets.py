@@ -171,3 +171,17 @@ def test_no_exact_point_is_not_a_solved_answer() -> None:
     assert s.status == "solved" and s.value == pytest.approx(100.0)
     assert s.max_residual() > 1.0  # slide_alignment
     assert s.lower is None and s.stats["certified"] is False and s.stats["inexact_point"]
+
+
+def test_a_map_marks_unanswered_directions() -> None:
+    """``stability.maps.resistible_forces``: a direction the method did not answer (here a
+    time limit of 0 s) is NaN, not 0 N ("not resisted")."""
+    from stability.maps import resistible_forces
+
+    g = ex.pinch()
+    rmap = resistible_forces(g, "refinement", plane="xz", directions=2, commands=[0.1, 0.1],
+                             cap=10.0, time_limit=0.0)  # fmt: skip
+    assert np.isnan(rmap.magnitudes).all()
+    ok = resistible_forces(g, "refinement", plane="xz", directions=2, commands=[0.1, 0.1],
+                           cap=10.0)  # fmt: skip
+    assert np.isfinite(ok.magnitudes).all()
