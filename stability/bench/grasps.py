@@ -110,6 +110,25 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+TASKS = ("check", "max_disturbance", "optimal_commands")
+
+
+def queries_of(label: str, commands: np.ndarray, directions: int = 10, wrenches: int = 10,
+               seed: int = SEED) -> list[tuple[str, int, Any]]:  # fmt: skip
+    """Grasp ``label``'s queries as the benchmark draws them, ``(task, k, query)`` with
+    ``k`` the index within the task: one check, ``directions`` max disturbances, ``wrenches``
+    optimal commands (a smaller count gives the first ones of a larger)."""
+    rng = np.random.default_rng(seed * 1000 + ord(label))
+    out: list[tuple[str, int, Any]] = [
+        ("check", 0, Existence(ex.random_wrench(rng), commands=commands))
+    ]
+    out += [("max_disturbance", k, MaxDisturbance(_unit(rng), commands=commands, cap=100.0))
+            for k in range(directions)]  # fmt: skip
+    out += [("optimal_commands", k, OptimalCommands(ex.random_wrench(rng)))
+            for k in range(wrenches)]  # fmt: skip
+    return out
+
+
 def bench_grasps(
     directions: int = 10, wrenches: int = 10, time_limit: float = 60.0, seed: int = SEED,
     only: str | None = None, progress: bool = True, backend: str | None = None,
@@ -125,15 +144,7 @@ def bench_grasps(
     total = len(items) * (1 + directions + wrenches) if queries is None else len(queries)
     bar = tqdm(total=total, desc="grasps", disable=not progress)
     for label, g, f in items:
-        rng = np.random.default_rng(seed * 1000 + ord(label))
-        tasks: list[tuple[str, Any]] = [("check", Existence(ex.random_wrench(rng), commands=f))]
-        tasks += [("max_disturbance", MaxDisturbance(_unit(rng), commands=f, cap=100.0))
-                  for _ in range(directions)]  # fmt: skip
-        tasks += [("optimal_commands", OptimalCommands(ex.random_wrench(rng)))
-                  for _ in range(wrenches)]  # fmt: skip
-        seen: dict[str, int] = {}
-        for task, q in tasks:
-            k = seen[task] = seen.get(task, -1) + 1
+        for task, k, q in queries_of(label, f, directions, wrenches, seed):
             if queries is not None and (label, task, k) not in queries:
                 continue
             t0 = time.perf_counter()
@@ -162,7 +173,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for label in dict.fromkeys(r["grasp"] for r in rows):
         rs = [r for r in rows if r["grasp"] == label]
         row: dict[str, Any] = {"grasp": label, "contacts": rs[0]["contacts"]}
-        for task in ("check", "max_disturbance", "optimal_commands"):
+        for task in TASKS:
             ts = [r["time_s"] for r in rs if r["task"] == task]
             row[task + "_s"] = float(np.median(ts)) if ts else float("nan")
             row[task + "_timeouts"] = sum(r["status"] == "timeout" for r in rs if r["task"] == task)
@@ -293,7 +304,7 @@ def parse_queries(text: str | None) -> set[tuple[str, str, int]] | None:
     out = set()
     for item in text.split(","):
         parts = item.strip().split(":")
-        if len(parts) != 3 or parts[1] not in ("check", "max_disturbance", "optimal_commands"):
+        if len(parts) != 3 or parts[1] not in TASKS or not parts[2].isdigit():
             raise SystemExit(f"--queries: want grasp:task:index, got {item!r}")
         out.add((parts[0], parts[1], int(parts[2])))
     return out
@@ -305,7 +316,7 @@ def by_contacts(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str,
     out = []
     for variant in dict.fromkeys(r["variant"] for r in rows):
         for m in sorted({r["contacts"] for r in rows}):
-            for task in ("check", "max_disturbance", "optimal_commands"):
+            for task in TASKS:
                 rs = [r for r in rows if r["variant"] == variant and r["contacts"] == m
                       and r["task"] == task]  # fmt: skip
                 if not rs:

@@ -15,7 +15,7 @@ import pytest
 
 from stability import Existence, MaxDisturbance, OptimalCommands, solve
 from stability import examples as ex
-from stability.bench.grasps import _unit, grasps
+from stability.bench.grasps import grasps, queries_of
 
 GAP = 1e-4  # refinement's default certify_gap
 
@@ -23,9 +23,7 @@ GAP = 1e-4  # refinement's default certify_gap
 @pytest.fixture(scope="module")
 def bench_a():
     label, g, f = grasps()[0]
-    rng = np.random.default_rng(7 * 1000 + ord(label))
-    ex.random_wrench(rng)  # the check's wrench, as the benchmark draws it
-    dirs = [_unit(rng) for _ in range(3)]
+    dirs = [q.direction for t, _, q in queries_of(label, f, 3, 0) if t == "max_disturbance"]
     return g, f, dirs
 
 
@@ -90,9 +88,7 @@ def test_timeout_keeps_the_bracket_reached() -> None:
     """A time limit that ends the loop after its first rounds: status "timeout", no value,
     the relaxation's bound so far (and an exact value where one was found)."""
     label, g, f = grasps()[4]  # (e): 4 contacts, its max disturbance takes seconds
-    rng = np.random.default_rng(7 * 1000 + ord(label))
-    ex.random_wrench(rng)
-    q = MaxDisturbance(_unit(rng), commands=f, cap=100.0)
+    q = queries_of(label, f, 1, 0)[1][2]  # its first max disturbance
     sol = solve(g, q, method="refinement", time_limit=0.6)
     if sol.status == "solved":  # a fast machine: then the bracket is closed
         _in_bracket(sol)
@@ -129,10 +125,7 @@ def _bench_direction(label: str, k: int):
     """The benchmark's grasp ``label``, its commands and its ``k``-th max-disturbance
     direction (as ``python -m stability.bench grasps`` draws them)."""
     g, f = next((g, f) for lab, g, f in grasps() if lab == label)
-    rng = np.random.default_rng(7 * 1000 + ord(label))
-    ex.random_wrench(rng)  # the check's wrench
-    dirs = [_unit(rng) for _ in range(k + 1)]
-    return g, f, dirs[k]
+    return g, f, queries_of(label, f, k + 1, 0)[-1][2].direction
 
 
 def test_probe_finds_an_exact_point_the_rounds_missed() -> None:
