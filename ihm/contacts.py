@@ -15,36 +15,50 @@ MuJoCo gives each contact a frame whose first row is the normal pointing from
 ``geom2`` in that frame. Where the object is ``geom1`` the frame is turned
 about ``t2`` (``n, t1 -> -n, -t1``), which keeps it right-handed.
 
-Coupled joints: active joint equalities ``q_1 = a0 + a1 q_2`` (MuJoCo
-``<equality><joint polycoef="a0 a1 0 0 0"/>``) make ``q_1`` a dependent joint.
-``J`` and ``R`` are expressed over the *independent* hand joints only:
-``q_full = T q`` with ``T`` (nv_hand x l), ``J = J_full T``, ``R = T^T R_full``.
-The equality's constraint force ``lambda (e_1 - a1 e_2)`` is annihilated by
-``T^T``, so hand equilibrium reads ``J^T c = R f`` over the independent joints.
-This is how the Barrett hand's rigidly coupled proximal/distal joints and
-mirrored spread joints reach the thesis' model (all finger torque on the
-proximal joint). Nonlinear couplings are refused.
+The hand (:mod:`ihm.handmodel`): closed linkages (every active ``connect``, ``weld``,
+``joint`` and ``tendon`` equality among hand bodies) are folded into independent
+coordinates, ``q_full = T q`` with ``J = J_full T`` and ``R = T^T R_full``; active joint
+and tendon limits become one-way stops (columns of ``R`` commanded 0); saturated
+actuators, passive springs and the links' weight become constant force sources
+(backdrivable columns). What the model leaves out (dry joint friction, hand contacts
+with anything but the object) is warned about by name, and the hand-equilibrium
+residual ``J^T c - R f`` with MuJoCo's own forces is checked: above ``hand_rtol`` of the
+joint torques it raises.
 
-Duplicate contacts: MuJoCo may report the same touch point more than once for
-one geom pair (e.g. box-box at a vertex). Contacts of the same geom pair
-whose points lie within ``merge_tol`` [m] and whose normals agree within
-``1e-3`` rad are merged into one: the point is their mean, the frame the
-first one's, the force their sum. Distinct points of a line or face contact
-(capsule on a face: two points) stay distinct, as in the thesis' point-contact
-model.
+Merging contacts: MuJoCo may report the same touch point more than once (box-box at a
+vertex; two geoms of one link whose faces meet, such as a pad made of two boxes or a pad
+and its silicone layer). Contacts between the same *hand body* and *object body* whose
+points lie within ``merge_tol`` [m] (default 0.1 mm) and whose normals agree within
+``1e-3`` rad are merged into one: the point is their mean, the frame the first one's,
+the force their sum, the friction the smallest. Distinct points of a line or face
+contact stay distinct, as in the thesis' point-contact model.
+
+Reducing a patch (``reduce="extremes"``, optional): a face contact reported as many
+points (a pad on a box face) costs the 3D solvers time exponential in the contact count.
+Each patch (contacts of one hand body and object body with normals within 1e-3 rad) is
+reduced to at most ``patch_points`` points, chosen farthest first (the two farthest
+apart, then the one farthest from them). A dropped point's MuJoCo force is added to the
+nearest kept point (the object residual reports the moment this moves). Its effect on
+the answers is measured in ``docs/linkage.md``.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Iterable
 from typing import Any
 
 import mujoco
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
+from .handmodel import HandModel, HandModelError, hand_model
+
 __all__ = [
+    "HandModelError",
+    "HandModelWarning",
     "SceneGrasp",
     "body_subtree",
     "contact_frame_force",
@@ -53,8 +67,6 @@ __all__ = [
     "transmission",
 ]
 
-_HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
-
 
 class SceneGrasp(Grasp):
     """A :class:`stability.Grasp` read off a MuJoCo state, with what MuJoCo reported.
@@ -62,12 +74,19 @@ class SceneGrasp(Grasp):
     Extra attributes (all in the object frame, SI units):
 
     forces : (m, 3) contact forces MuJoCo computed, ``(c_n, c_t1, c_t2)`` [N]
-    commands : (a,) actuator forces at this state (``data.actuator_force``)
-        [N m for joint actuators, N for tendons]
+    commands : (a,) ``f_c`` per column of ``R``: actuators their force at this state
+        (``data.actuator_force``) [N m for joint actuators, N for tendons], stops 0,
+        constant torques (springs, link weight) their torque [N m]
+    actuator_forces : (a,) the columns' actual forces at this state (a stop's limit
+        force, an actuator's force plus a ratchet's passive reaction)
+    actuator_names : names of the ``a`` columns of ``R`` (actuators, ``limit:<joint>``,
+        ``spring:<joint>``, ``gravity``, ``applied``)
+    elements : :class:`ihm.handmodel.HandElement` per column and folded equality
+    hand : the :class:`ihm.handmodel.HandModel` (``T``, dependent joints, warnings)
+    hand_residual : ``max |J^T c - R f| / max |J^T c|`` with MuJoCo's forces
     gravity_wrench : (6,) gravity's wrench on the object about the object
         origin ``(f, torque)`` [N, N m]
     joint_names : names of the ``l`` independent hand joints (columns of ``J``)
-    actuator_names : names of the ``a`` actuators (columns of ``R``)
     T : (nv_hand, l) independent-to-full hand joint map (coupled joints)
     hand_dofs : (nv_hand,) MuJoCo dof indices of the hand
     hand_bodies : (m,) MuJoCo body id of the hand link at each contact
@@ -78,6 +97,10 @@ class SceneGrasp(Grasp):
 
     forces: NDArray[np.float64]
     commands: NDArray[np.float64]
+    actuator_forces: NDArray[np.float64]
+    elements: list
+    hand: HandModel
+    hand_residual: float
     gravity_wrench: NDArray[np.float64]
     joint_names: list[str]
     actuator_names: list[str]
@@ -103,14 +126,28 @@ class SceneGrasp(Grasp):
         """How well MuJoCo's contact forces satisfy the model's statics [N, N m].
 
         ``object``: ``max |G c + w_gravity|`` (object equilibrium, no other load);
-        ``hand``: ``max |J^T c - R f|`` with ``f`` the actuator forces (hand
-        equilibrium over the independent joints; hand links are gravity-compensated).
+        ``hand``: ``max |J^T c - R f|`` with ``f`` the columns' actual forces
+        (``actuator_forces``; hand equilibrium over the independent joints).
         """
         c = self.forces.reshape(-1)
         return {
             "object": float(np.abs(self.G @ c + self.gravity_wrench).max()),
-            "hand": float(np.abs(self.J.T @ c - self.R @ self.commands).max()),
+            "hand": float(np.abs(self.J.T @ c - self.R @ self.actuator_forces).max()),
         }
+
+    def command_range(
+        self, upper: float | ArrayLike | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(lower, upper)`` for :class:`stability.OptimalCommands` over the columns of ``R``:
+        the actuators free in ``[0, upper]`` (``upper`` per actuator or one number; default
+        no bound, ``inf``), every other column (stops, springs, weight) pinned at its
+        command."""
+        act = self.hand.actuated
+        lo = np.where(act, 0.0, self.commands)
+        hi = self.commands.copy()
+        hi[act] = np.inf if upper is None else np.broadcast_to(np.asarray(upper, float),
+                                                               (int(act.sum()),))  # fmt: skip
+        return lo, hi
 
     def forces_world(self) -> NDArray[np.float64]:
         """Forces of the hand on the object in world coordinates, (m, 3) [N]."""
@@ -137,62 +174,16 @@ def body_subtree(model: mujoco.MjModel, root: int) -> NDArray[np.bool_]:
 def hand_coordinates(
     model: mujoco.MjModel, data: mujoco.MjData, object_body: str = "object"
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], list[str]]:
-    """The hand's dofs and its independent coordinates.
+    """The hand's dofs and its independent coordinates (after ``mj_forward``).
 
-    Returns ``(hand_dofs, T, names)``: the MuJoCo dof indices of every hinge or
-    slide joint outside the object's subtree, the map ``T`` (len(hand_dofs) x l)
-    with ``qvel[hand_dofs] = T qdot`` under the active linear joint
-    equalities, and the names of the ``l`` independent joints.
+    Returns ``(hand_dofs, T, names)``: the MuJoCo dof indices of every hinge or slide
+    joint outside the object's subtree, the map ``T`` (len(hand_dofs) x l) with
+    ``qvel[hand_dofs] = T qdot`` under the hand's active equality constraints
+    (:mod:`ihm.handmodel`), and the names of the ``l`` independent joints.
     """
-    obj = _body_id(model, object_body)
-    in_obj = body_subtree(model, obj)
-    joints = [
-        j
-        for j in range(model.njnt)
-        if not in_obj[model.jnt_bodyid[j]] and int(model.jnt_type[j]) in _HINGE_SLIDE
-    ]
-    others = [j for j in range(model.njnt) if not in_obj[model.jnt_bodyid[j]] and j not in joints]
-    if others:
-        raise GraspError(
-            f"hand joints must be hinges or slides; got {[model.joint(j).name for j in others]}"
-        )
-    # dependent joint -> (independent joint or -1 for a locked joint, ratio)
-    depends: dict[int, tuple[int, float]] = {}
-    active = data.eq_active
-    for e in range(model.neq):
-        if int(model.eq_type[e]) != int(mujoco.mjtEq.mjEQ_JOINT) or not active[e]:
-            continue
-        j1, j2 = int(model.eq_obj1id[e]), int(model.eq_obj2id[e])
-        if j1 not in joints:
-            continue
-        poly = model.eq_data[e, :5]
-        if np.any(np.abs(poly[2:]) > 1e-12):
-            raise GraspError(
-                f"joint equality {model.equality(e).name or e} is nonlinear "
-                f"(polycoef {poly.tolist()}); only q1 = a0 + a1 q2 is supported"
-            )
-        depends[j1] = (j2, float(poly[1]) if j2 >= 0 else 0.0)
-    indep = [j for j in joints if j not in depends]
-
-    def resolve(j: int, depth: int = 0) -> dict[int, float]:
-        if depth > len(joints):
-            raise GraspError("cyclic joint equalities")
-        if j not in depends:
-            return {j: 1.0}
-        j2, a = depends[j]
-        if j2 < 0 or a == 0.0:
-            return {}
-        return {k: a * v for k, v in resolve(j2, depth + 1).items()}
-
-    col = {j: c for c, j in enumerate(indep)}
-    T = np.zeros((len(joints), len(indep)))
-    for r, j in enumerate(joints):
-        for k, v in resolve(j).items():
-            if k not in col:
-                raise GraspError(f"joint {model.joint(j).name} coupled to a non-hand joint")
-            T[r, col[k]] += v
-    dofs = np.array([model.jnt_dofadr[j] for j in joints], dtype=np.int64)
-    return dofs, T, [model.joint(j).name for j in indep]
+    in_obj = body_subtree(model, _body_id(model, object_body))
+    hm = hand_model(model, data, in_obj)
+    return hm.dofs, hm.T, hm.joint_names
 
 
 def transmission(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float64]:
@@ -236,26 +227,51 @@ def grasp_from_mujoco(
     object_body: str = "object",
     *,
     merge_tol: float = 1e-4,
+    reduce: str | None = None,
+    patch_points: int = 3,
+    backdrivable: bool | Iterable[str] | None = None,
+    servo: str = "nonbackdrivable",
+    hand_rtol: float = 0.02,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
 
     One contact per active MuJoCo contact between the object's subtree and any
     other body (the hand; a static body counts as a fixed finger with zero
-    Jacobian rows), duplicates merged (see the module docstring). Friction is
-    MuJoCo's sliding friction of the contact (``contact.friction[0]``; 0 for a
-    frictionless ``condim=1`` contact; ``condim`` 4 or 6, with torsional or
-    rolling friction, is refused).
+    Jacobian rows), duplicates merged and patches optionally reduced (module
+    docstring). Friction is MuJoCo's sliding friction of the contact
+    (``contact.friction[0]``; 0 for a frictionless ``condim=1`` contact; ``condim``
+    4 or 6, with torsional or rolling friction, is refused). The hand's equalities,
+    limits, springs and saturated actuators are modelled as :mod:`ihm.handmodel`
+    says (``backdrivable``, ``servo`` are passed to it); ``grasp.elements`` lists
+    each, ``grasp.commands`` holds ``f_c`` per column of ``R`` (actuators: their force
+    at the state; stops: 0; constant torques: the torque).
+
+    The hand equilibrium ``J^T c = R f`` with MuJoCo's contact forces and the actual
+    column forces ``f`` (a stop's limit force, an actuator's force plus a ratchet's
+    reaction) is checked: ``grasp.hand_residual`` is ``max |J^T c - R f|`` over the
+    joints divided by the largest joint torque ``max |J^T c|``; above ``hand_rtol`` it
+    raises, naming what the model leaves out. Unmodelled elements warn
+    (:class:`HandModelWarning`).
 
     Raises
     ------
     GraspError
         No body ``object_body``; no active contact between it and the hand; a
-        contact with torsional/rolling friction (condim > 3);
-        a hand joint that is not a hinge or slide; a nonlinear joint coupling.
+        contact with torsional/rolling friction (condim > 3); a bad option.
+    HandModelError
+        A hand joint that is not a hinge or slide; an equality tying the hand to the
+        object; a hand-equilibrium residual above ``hand_rtol``.
     """
+    if not (isinstance(merge_tol, (int, float)) and np.isfinite(merge_tol) and merge_tol >= 0):
+        raise GraspError(f"merge_tol must be a finite number >= 0 [m], got {merge_tol!r}")
+    if reduce not in (None, "extremes"):
+        raise GraspError(f"reduce must be None or 'extremes', got {reduce!r}")
+    if not isinstance(patch_points, (int, np.integer)) or patch_points < 1:
+        raise GraspError(f"patch_points must be an integer >= 1, got {patch_points!r}")
+    if not (np.isfinite(hand_rtol) and hand_rtol > 0):
+        raise GraspError(f"hand_rtol must be a finite number > 0, got {hand_rtol!r}")
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
-    hand_dofs, T, joint_names = hand_coordinates(model, data, object_body)
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
@@ -276,25 +292,29 @@ def grasp_from_mujoco(
         obj_first = bool(in_obj[b1])
         frame, force = contact_frame_force(model, data, i, obj_first)
         hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
+        bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         pos = con.pos.copy()
+        mu = 0.0 if con.dim == 1 else float(con.friction[0])
         for g in groups:
             if (
-                g["pair"] == (hand_geom, obj_geom)
-                and np.linalg.norm(g["pos"][0] - pos) <= merge_tol
+                g["bodies"] == bodies
+                and np.linalg.norm(np.mean(g["pos"], axis=0) - pos) <= merge_tol
                 and g["frame"][0] @ frame[0] >= np.cos(1e-3)
             ):
                 g["pos"].append(pos)
                 g["force_world"] += frame.T @ force
                 g["ids"].append(i)
+                g["mu"] = min(g["mu"], mu)
                 break
         else:
             groups.append(
                 {
                     "pair": (hand_geom, obj_geom),
+                    "bodies": bodies,
                     "pos": [pos],
                     "frame": frame,
                     "force_world": frame.T @ force,
-                    "mu": 0.0 if con.dim == 1 else float(con.friction[0]),
+                    "mu": mu,
                     "ids": [i],
                 }
             )
@@ -303,7 +323,12 @@ def grasp_from_mujoco(
             f"no active contact between body {object_body!r} and the hand "
             f"({data.ncon} MuJoCo contacts in all); settle the grasp first"
         )
+    if reduce == "extremes":
+        groups = _reduce_patches(groups, patch_points)
 
+    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
+                    object_contacts=[i for g in groups for i in g["ids"]])  # fmt: skip
+    hand_dofs, T = hm.dofs, hm.T
     m = len(groups)
     pts_w = np.array([np.mean(g["pos"], axis=0) for g in groups])
     frames_w = np.array([g["frame"] for g in groups])  # (m, 3, 3) rows n, t1, t2
@@ -316,7 +341,7 @@ def grasp_from_mujoco(
     for k in range(m):
         mujoco.mj_jac(model, data, jacp, None, pts_w[k], int(hand_bodies[k]))
         J[3 * k : 3 * k + 3] = frames_w[k] @ jacp[:, hand_dofs] @ T
-    R = T.T @ transmission(model, data)[:, hand_dofs].T
+    R = hm.R
 
     pts_o = (pts_w - x_o) @ R_o
     frames_o = frames_w @ R_o  # each row v -> R_o^T v
@@ -327,15 +352,19 @@ def grasp_from_mujoco(
         tangents=frames_o[:, 1:],
         J=J,
         R=R,
+        backdrivable=hm.backdrivable,
     )
     mass = model.body_subtreemass[obj]
     f_g = mass * model.opt.gravity
     tau_g = np.cross(data.subtree_com[obj] - x_o, f_g)
     grasp.forces = forces
-    grasp.commands = data.actuator_force.copy()
+    grasp.commands = hm.commands
+    grasp.actuator_forces = hm.forces
     grasp.gravity_wrench = np.concatenate([R_o.T @ f_g, R_o.T @ tau_g])
-    grasp.joint_names = joint_names
-    grasp.actuator_names = [model.actuator(a).name for a in range(model.nu)]
+    grasp.joint_names = hm.joint_names
+    grasp.actuator_names = hm.names
+    grasp.elements = hm.elements
+    grasp.hand = hm
     grasp.T = T
     grasp.hand_dofs = hand_dofs
     grasp.hand_bodies = hand_bodies
@@ -344,4 +373,59 @@ def grasp_from_mujoco(
     grasp.contact_ids = [g["ids"] for g in groups]
     grasp.object_pos = x_o
     grasp.object_mat = R_o
+    torque = np.abs(J.T @ forces.reshape(-1))
+    res = np.abs(J.T @ forces.reshape(-1) - R @ hm.forces)
+    grasp.hand_residual = float(res.max(initial=0.0) / max(float(torque.max(initial=0.0)), 1e-9))
+    for w in hm.warnings:
+        warnings.warn(f"grasp_from_mujoco: not in the grasp model: {w}", HandModelWarning,
+                      stacklevel=2)  # fmt: skip
+    if grasp.hand_residual > hand_rtol:
+        k = int(np.argmax(res))
+        raise HandModelError(
+            f"hand equilibrium J^T c = R f does not hold with MuJoCo's forces: residual "
+            f"{res[k]:.3g} at joint {hm.joint_names[k]} ({grasp.hand_residual:.1%} of the "
+            f"largest joint torque {torque.max():.3g}; hand_rtol {hand_rtol:g}). Left out of "
+            f"the model: {'; '.join(hm.warnings) or 'nothing named (is the hand at rest?)'}"
+        )
     return grasp
+
+
+class HandModelWarning(UserWarning):
+    """An element of the hand that the grasp model leaves out (named in the message)."""
+
+
+def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, Any]]:
+    """Each patch (same hand and object body, normals within 1e-3 rad) to at most ``keep``
+    contacts, farthest first; a dropped contact's force goes to the nearest kept one."""
+    patches: list[list[dict[str, Any]]] = []
+    for g in groups:
+        for p in patches:
+            if p[0]["bodies"] == g["bodies"] and p[0]["frame"][0] @ g["frame"][0] >= np.cos(1e-3):
+                p.append(g)
+                break
+        else:
+            patches.append([g])
+    out = []
+    for p in patches:
+        if len(p) <= keep:
+            out.extend(p)
+            continue
+        pts = np.array([np.mean(g["pos"], axis=0) for g in p])
+        dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+        i, j = np.unravel_index(np.argmax(dist), dist.shape)
+        chosen = [int(i), int(j)]
+        while len(chosen) < keep:
+            far = dist[:, chosen].min(axis=1)
+            far[chosen] = -1.0
+            chosen.append(int(np.argmax(far)))
+        kept = [dict(p[k], pos=list(p[k]["pos"]), ids=list(p[k]["ids"]),
+                     force_world=p[k]["force_world"].copy()) for k in chosen]  # fmt: skip
+        for k, g in enumerate(p):
+            if k in chosen:
+                continue
+            near = kept[int(np.argmin(dist[k, chosen]))]
+            near["force_world"] = near["force_world"] + g["force_world"]
+            near["ids"] = near["ids"] + g["ids"]
+            near["mu"] = min(near["mu"], g["mu"])
+        out.extend(kept)
+    return out

@@ -146,6 +146,64 @@ def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
     return kp
 
 
+def _affine(model: mujoco.MjModel) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per actuator, at rest (velocity 0), ``force = g(L) ctrl + b(L)`` with ``L`` the
+    actuator length: returns ``(gain_coefficients, bias_coefficients)``, each (nu, 2) as
+    ``(c0, c1)`` in ``c0 + c1 L``. Raises :class:`SceneError` naming an actuator whose
+    force the commands cannot set this way (muscle or user gain/bias, integrator or
+    muscle dynamics: at rest its force is not a function of ``ctrl``)."""
+    G = np.zeros((model.nu, 2))
+    B = np.zeros((model.nu, 2))
+    for a in range(model.nu):
+        name = model.actuator(a).name or f"#{a}"
+        gt, bt, dt = (
+            model.actuator_gaintype[a],
+            model.actuator_biastype[a],
+            model.actuator_dyntype[a],
+        )
+        if gt not in (int(mujoco.mjtGain.mjGAIN_FIXED), int(mujoco.mjtGain.mjGAIN_AFFINE)):
+            raise SceneError(f"actuator {name}: gain type {mujoco.mjtGain(int(gt)).name} is not "
+                             "supported by settle (fixed or affine are)")  # fmt: skip
+        if bt not in (int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE)):
+            raise SceneError(f"actuator {name}: bias type {mujoco.mjtBias(int(bt)).name} is not "
+                             "supported by settle (none or affine are)")  # fmt: skip
+        if dt not in (int(mujoco.mjtDyn.mjDYN_NONE), int(mujoco.mjtDyn.mjDYN_FILTER),
+                      int(mujoco.mjtDyn.mjDYN_FILTEREXACT)):  # fmt: skip
+            raise SceneError(
+                f"actuator {name}: dynamics {mujoco.mjtDyn(int(dt)).name}: its force at rest is "
+                "not set by ctrl; settle supports none and filter"
+            )
+        g = model.actuator_gainprm[a]
+        G[a] = (g[0], g[1] if gt == int(mujoco.mjtGain.mjGAIN_AFFINE) else 0.0)
+        if bt == int(mujoco.mjtBias.mjBIAS_AFFINE):
+            B[a] = model.actuator_biasprm[a, :2]
+    return G, B
+
+
+def _commanded_ctrl(
+    model: mujoco.MjModel, data: mujoco.MjData, f_c: NDArray[np.float64],
+    G: NDArray[np.float64], B: NDArray[np.float64],
+) -> NDArray[np.float64]:  # fmt: skip
+    """The ``ctrl`` that makes each actuator give force ``f_c`` at its present length at
+    rest: ``(f_c - b(L)) / g(L)``. A force at a bound of the actuator's ``forcerange`` asks
+    for saturation: ``ctrl`` goes to the end of ``ctrlrange`` that drives it there (a
+    gripper's "close with full force")."""
+    L = data.actuator_length
+    gain = G[:, 0] + G[:, 1] * L
+    bias = B[:, 0] + B[:, 1] * L
+    ctrl = (f_c - bias) / np.where(np.abs(gain) > 1e-12, gain, 1.0)
+    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool)):
+        lo, hi = model.actuator_forcerange[a]
+        if hi <= lo or not (np.isclose(f_c[a], lo) or np.isclose(f_c[a], hi)):
+            continue
+        up = np.isclose(f_c[a], hi) == (gain[a] > 0)
+        if model.actuator_ctrllimited[a]:
+            ctrl[a] = model.actuator_ctrlrange[a, 1 if up else 0]
+        else:
+            ctrl[a] = ctrl[a] + (1.0 if up else -1.0) * 10.0 * (1.0 + abs(f_c[a]) / abs(gain[a]))
+    return ctrl
+
+
 @contextmanager
 def _gravity_off(model: mujoco.MjModel) -> Iterator[None]:
     """Gravity switched off inside the block, restored after it (also on errors)."""
@@ -204,6 +262,8 @@ def settle(
     rounds: int = 6,
     ftol: float = 1e-3,
     ratchet: Ratchet | None = None,
+    force_tol: float = 0.05,
+    object_body: str | None = "object",
 ) -> SettleInfo:
     """Close the hand with actuator forces ``commands`` until the grasp is at rest.
 
@@ -214,20 +274,30 @@ def settle(
        ``ctrl = length + f_c / kp`` every step: a pure force source).
     2. Switch gravity back on and step until every generalized velocity is
        below ``vtol`` [m/s, rad/s] for ``hold_s`` consecutive seconds.
-    3. Position-servo actuators (``force = kp (ctrl - length)``, the four-finger
-       hand's series-elastic joints) are driven to the commanded *force*: each
-       round sets ``ctrl = length + f_c / kp`` and repeats step 2, until
-       ``|actuator_force - f_c| <= ftol (1 + |f_c|)`` or ``rounds`` rounds
-       (the state after the last round is returned, at rest; the remaining
-       force error is reported in :attr:`SettleInfo.force_error`).
-       Motors (``force = ctrl``) get ``ctrl = f_c`` once.
+    3. Every actuator is driven to its commanded *force*, whatever its gain and bias
+       (MuJoCo ``general``: ``force = (g0 + g1 L) ctrl + b0 + b1 L`` at rest, ``L`` its
+       length: motors, position servos such as the four-finger hand's series-elastic
+       joints, a rescaled servo with ``gain != kp`` such as a Robotiq gripper's, on
+       joints or tendons): ``ctrl = (f_c - b(L)) / g(L)``. A command at a bound of the
+       actuator's ``forcerange`` drives it to saturation (``ctrl`` at the end of its
+       ``ctrlrange``). Where the force depends on ``L`` each round resets ``ctrl`` and
+       repeats step 2, until ``|actuator_force - f_c| <= ftol (1 + |f_c|)`` or ``rounds``
+       rounds; the remaining error is :attr:`SettleInfo.force_error`.
+    4. Checks: a command outside the actuator's ``forcerange``, or one that needs a
+       ``ctrl`` beyond ``ctrlrange`` (missed by more than ``force_tol (1 + |f_c|)`` with
+       ``ctrl`` at the range's end) raises :class:`SceneError` naming the actuator.
+       With ``object_body`` (default ``"object"``, None to skip; skipped when the
+       model has no such body), the object touches a moving hand body (else "the
+       fingers did not close" or "the object fell": it rests on static bodies only).
 
     With ``ratchet`` (:class:`ihm.ratchet.Ratchet`) every step is ``ratchet.step()``: the
     ratcheted joints and tendons can close but not open, so an actuator commanded 0 is a
     passive, nonbackdrivable support (the thesis' preload protocol of grasp example 2).
 
     Raises :class:`SceneError` if the grasp is not at rest after ``max_s``
-    simulated seconds (per round), or the simulation diverges.
+    simulated seconds (per round), the simulation diverges, an actuator's force cannot
+    be set by ``ctrl`` (muscle, integrator dynamics) or misses its command, or the
+    object is not held (step 4).
     """
     import time
 
@@ -243,16 +313,24 @@ def settle(
         raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
     if not np.all(np.isfinite(f_c)):
         raise SceneError("commands contain NaN or inf")
+    if not (np.isfinite(force_tol) and force_tol > 0):
+        raise SceneError(f"force_tol must be a finite number > 0, got {force_tol!r}")
+    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool)):
+        flo, fhi = model.actuator_forcerange[a]
+        if fhi > flo and not (flo - 1e-9 <= f_c[a] <= fhi + 1e-9):
+            raise SceneError(
+                f"actuator {model.actuator(a).name or a}: command {f_c[a]:g} is outside its "
+                f"forcerange [{flo:g}, {fhi:g}]"
+            )
     t0 = time.perf_counter()
-    kp = _position_gain(model)
-    servo = kp > 0
-    gain = np.where(servo, 1.0, model.actuator_gainprm[:, 0])
-    if np.any(~servo & (np.abs(gain) < 1e-12)):
-        raise SceneError("an actuator has zero gain; cannot command its force")
+    G, B = _affine(model)
+    if np.any(np.abs(G[:, 0]) + np.abs(G[:, 1]) < 1e-12):
+        bad = [model.actuator(a).name for a in np.flatnonzero(np.abs(G).sum(axis=1) < 1e-12)]
+        raise SceneError(f"actuator(s) {bad} have zero gain; cannot command their force")
+    feedback = np.abs(B[:, 1]) + np.abs(G[:, 1]) > 0  # force depends on length: rounds
 
     def set_ctrl() -> None:
-        ctrl = np.where(servo, data.actuator_length + f_c / np.where(servo, kp, 1.0), f_c / gain)
-        data.ctrl[:] = ctrl
+        data.ctrl[:] = _commanded_ctrl(model, data, f_c, G, B)
 
     mujoco.mj_forward(model, data)
     set_ctrl()
@@ -273,13 +351,28 @@ def settle(
                 f"grasp not at rest after {max_s:.1f} s simulated (max |qvel| = {vmax:.3g} "
                 f"> {vtol:g}); the object may have slipped out"
             )
-        if not servo.any():
+        if not feedback.any():
             break
         err = np.abs(data.actuator_force - f_c)
         if np.all(err <= ftol * (1 + np.abs(f_c))) or done_rounds == rounds:
             break  # converged, or out of rounds: keep the state at rest
         set_ctrl()
     mujoco.mj_forward(model, data)
+    err = np.abs(data.actuator_force - f_c) if model.nu else np.zeros(0)
+    lo, hi = model.actuator_ctrlrange.T
+    pinned = model.actuator_ctrllimited.astype(bool) & (
+        np.isclose(data.ctrl, lo) | np.isclose(data.ctrl, hi)
+    )
+    bad = np.flatnonzero(pinned & (err > force_tol * (1 + np.abs(f_c))))
+    if bad.size:  # the command needs a ctrl beyond ctrlrange: it cannot be given
+        a = int(bad[0])
+        raise SceneError(
+            f"actuator {model.actuator(a).name or a} gives {data.actuator_force[a]:.4g} at "
+            f"rest, not the commanded {f_c[a]:.4g}: its ctrl {data.ctrl[a]:.4g} is at the end "
+            f"of ctrlrange [{lo[a]:g}, {hi[a]:g}] (force_tol {force_tol:g})"
+        )
+    if object_body is not None:
+        _check_held(model, data, object_body)
     return SettleInfo(
         time_s=float(data.time),
         wall_s=time.perf_counter() - t0,
@@ -290,6 +383,43 @@ def settle(
         force_error=float(np.abs(data.actuator_force - f_c).max()) if model.nu else 0.0,
         contacts=int(data.ncon),
     )
+
+
+def _check_held(model: mujoco.MjModel, data: mujoco.MjData, object_body: str) -> None:
+    """:class:`SceneError` unless the object touches a hand body that can move."""
+    obj = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_body)
+    if obj < 0:
+        return
+    inside = np.zeros(model.nbody, dtype=bool)
+    inside[obj] = True
+    for b in range(obj + 1, model.nbody):
+        inside[b] = inside[model.body_parentid[b]]
+    moving, static = set(), set()
+    for c in data.contact[: data.ncon]:
+        b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
+        if inside[b1] == inside[b2]:
+            continue
+        other = int(b2 if inside[b1] else b1)
+        (moving if model.body_dofnum[other] or _has_moving_parent(model, other) else static).add(
+            model.body(other).name or str(other)
+        )
+    if moving:
+        return
+    if static:
+        raise SceneError(f"the object fell: at rest it touches only static bodies "
+                         f"{sorted(static)}, no finger")  # fmt: skip
+    raise SceneError(
+        "the fingers did not close: at rest the object touches nothing "
+        "(commands too small, the wrong sign, or the object out of reach)"
+    )
+
+
+def _has_moving_parent(model: mujoco.MjModel, b: int) -> bool:
+    while b > 0:
+        if model.body_dofnum[b]:
+            return True
+        b = int(model.body_parentid[b])
+    return False
 
 
 def load_scene(

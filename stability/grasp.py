@@ -17,7 +17,12 @@ Conventions (DESIGN.md, thesis ch. 4-5):
 * Optional hand: ``J`` (2m x l or 3m x l) maps joint motion ``q`` to contact
   motion in contact frames, so ``d = G^T r - J q``; ``R`` (l x a) maps actuator
   forces to joint torques ``tau = R f``. Without ``J`` the hand is a rigid
-  fixture.
+  fixture. Actuators are nonbackdrivable (thesis ch. 5: ``R^T q >= 0``, ``f >= f_c``,
+  ``f = f_c`` where the transmission moves) unless marked ``backdrivable``: a
+  backdrivable actuator is a constant force source, ``f = f_c`` whatever its
+  transmission does (``R^T q`` free). That is how a motor without a self-locking
+  gear, a saturated position servo, a passive spring's torque or a link's weight
+  enters the model (``ihm.grasp_from_mujoco``).
 
 Units: positions in metres (or any consistent length unit), forces in newtons,
 torques in newton-metres; ``mu`` is dimensionless.
@@ -86,6 +91,10 @@ class Grasp:
     R : (l, a) array, optional
         Transmission: joint torques ``tau = R f`` for actuator forces ``f``.
         Requires ``J``.
+    backdrivable : (a,) bool array, optional
+        Per actuator (column of ``R``; of the identity when ``R`` is not given):
+        True makes it a constant force source (``f = f_c``, transmission free);
+        default all False (the thesis' nonbackdrivable actuators). Requires ``J``.
 
     Raises
     ------
@@ -102,6 +111,7 @@ class Grasp:
         tangents: ArrayLike | None = None,
         J: ArrayLike | None = None,
         R: ArrayLike | None = None,
+        backdrivable: ArrayLike | None = None,
     ) -> None:
         p = _as_finite("points", points)
         n = _as_finite("normals", normals)
@@ -155,7 +165,22 @@ class Grasp:
                     f"{self._J.shape[1]} joints, got {Rm.shape}"
                 )
             self._R = Rm
-        for arr in (self._points, self._normals, self._tangents, self._mu, self._J, self._R):
+        self._backdrivable = None
+        if self._J is not None:
+            a = self._J.shape[1] if self._R is None else self._R.shape[1]
+            self._backdrivable = np.zeros(a, dtype=bool)
+            if backdrivable is not None:
+                b = np.asarray(backdrivable)
+                if b.shape != (a,) or b.dtype.kind not in "bi" or not np.isin(b, (0, 1)).all():
+                    raise GraspError(
+                        f"backdrivable must be {a} booleans (one per actuator), got "
+                        f"{backdrivable!r}"
+                    )
+                self._backdrivable = b.astype(bool)
+        elif backdrivable is not None:
+            raise GraspError("backdrivable given without J (hand Jacobian)")
+        for arr in (self._points, self._normals, self._tangents, self._mu, self._J, self._R,
+                    self._backdrivable):  # fmt: skip
             if arr is None:
                 continue
             arr.setflags(write=False)
@@ -236,6 +261,12 @@ class Grasp:
     def R(self) -> NDArray[np.float64] | None:
         """Transmission (joint torques per actuator force), or None."""
         return self._R
+
+    @property
+    def backdrivable(self) -> NDArray[np.bool_] | None:
+        """(a,) per actuator: True for a constant force source (``f = f_c``, transmission
+        free), False for the thesis' nonbackdrivable actuator; None without a hand."""
+        return self._backdrivable
 
     @property
     def wrench_dim(self) -> int:

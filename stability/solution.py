@@ -62,7 +62,8 @@ def model_residuals(
 
     * ``hand_equilibrium``: ``max |J^T c - R f|`` [N m or N per joint].
     * ``actuator_command``: ``max(0, f_c - f)``: an actuator never gives less than its
-      command.
+      command; ``|f - f_c|`` for a backdrivable one (``Grasp.backdrivable``: a constant
+      force source). The two conditions below skip backdrivable actuators.
     * ``nonbackdrivable`` (needs ``hand_motion`` ``q``): ``max(0, -v)`` with transmission
       motion ``v = R^T (q - q_ref)``: no transmission runs backwards. ``q_ref``
       (``hand_reference``) is where the actuators lock, 0 unless the method applied a
@@ -92,13 +93,16 @@ def model_residuals(
         f = np.asarray(actuator_forces, dtype=float)
         R = np.eye(grasp.J.shape[1]) if grasp.R is None else grasp.R
         fc = np.zeros(R.shape[1]) if commands is None else np.asarray(commands, dtype=float)
+        back = getattr(grasp, "backdrivable", None)
+        back = np.zeros(R.shape[1], dtype=bool) if back is None else np.asarray(back, bool)
         res["hand_equilibrium"] = float(np.max(np.abs(grasp.J.T @ c.reshape(-1) - R @ f)))
-        res["actuator_command"] = float(np.max(np.maximum(0.0, fc - f), initial=0.0))
+        short = np.where(back, np.abs(f - fc), np.maximum(0.0, fc - f))
+        res["actuator_command"] = float(np.max(short, initial=0.0))
         if hand_motion is not None:
             q = np.asarray(hand_motion, dtype=float)
             if hand_reference is not None:
                 q = q - np.asarray(hand_reference, dtype=float)
-            v = R.T @ q
+            v = np.where(back, 0.0, R.T @ q)  # a backdrivable transmission moves freely
             res["nonbackdrivable"] = float(np.max(np.maximum(0.0, -v), initial=0.0)) + 0.0
             both = np.minimum(np.maximum(f - fc, 0.0), np.maximum(v, 0.0))
             res["actuator_complementarity"] = float(np.max(both, initial=0.0))

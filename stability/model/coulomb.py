@@ -254,7 +254,7 @@ def stuck_point(
     x = np.zeros(prob.model.n_vars)
     x[prob.y] = 1.0
     if prob.z is not None:
-        x[prob.z] = 1.0
+        x[prob.z] = np.where(prob.backdrivable, 0.0, 1.0)  # a backdrivable actuator never locks
     x[prob.c[:, 0]] = 1.0  # loaded: "stick" below, not "open"
     modes = [("stick", 0.0)] * grasp.m
     lp = _modes_lp(ex, x, modes, {})

@@ -203,6 +203,17 @@ class ExactPoint:
     x: NDArray[np.float64]  # the model's solution vector
 
 
+def _backdrivable(grasp: Grasp, na: int) -> NDArray[np.bool_]:
+    """The grasp's backdrivable mask over its ``na`` actuators (all False when not set)."""
+    back = getattr(grasp, "backdrivable", None)
+    if back is None:
+        return np.zeros(na, dtype=bool)
+    back = np.asarray(back, dtype=bool)
+    if back.shape != (na,):
+        raise GraspError(f"backdrivable has {back.size} entries for {na} actuators")
+    return back
+
+
 class ExactProblem:
     """The constraint set of thesis eqs. object_eq .. underactuation on a fresh
     :class:`~stability.mip.MipModel` (``self.model``), object equilibrium left to the
@@ -263,21 +274,27 @@ class ExactProblem:
         Gt = self.G.T.reshape(m, k, -1)
         self.J = None if g.J is None else _clean(g.J)
         Jn = None if g.J is None else self.J.reshape(m, k, -1)[:, 0, :]
+        self.backdrivable = None
         if hand is not None:
             R, fc = hand
             nl, na = R.shape
+            back = self.backdrivable = _backdrivable(grasp, na)
+            excess = np.where(back, 0.0, bounds.excess)  # a constant force source: f = f_c
             self.q = M.add_vars(nl, -INF, INF, "C", "q")
             if command_range is None:
-                self.f = M.add_vars(na, fc, fc + bounds.excess, "C", "f")
+                self.f = M.add_vars(na, fc, fc + excess, "C", "f")
             else:
                 lo_c, hi_c = command_range
                 self.fc = M.add_vars(na, lo_c, hi_c, "C", "fc")
-                self.f = M.add_vars(na, lo_c, hi_c + bounds.excess, "C", "f")
-                for a in range(na):  # 0 <= f - f_c <= E
-                    M.add_row([self.f[a], self.fc[a]], [1.0, -1.0], 0.0, float(bounds.excess[a]),
+                self.f = M.add_vars(na, lo_c, hi_c + excess, "C", "f")
+                for a in range(na):  # 0 <= f - f_c <= E (0 for a backdrivable actuator)
+                    M.add_row([self.f[a], self.fc[a]], [1.0, -1.0], 0.0, float(excess[a]),
                               f"excess{a}")  # fmt: skip
-            self.v = M.add_vars(na, 0.0, bounds.motion, "C", "v")
-            self.z = M.add_vars(na, 0, 1, "B", "z")
+            # transmission motion: one-way for a nonbackdrivable actuator, free otherwise
+            self.v = M.add_vars(na, np.where(back, -INF, 0.0), np.where(back, INF, bounds.motion),
+                                "C", "v")  # fmt: skip
+            # z: locked (1) or moving (0); a backdrivable actuator always "moves" (z = 0)
+            self.z = M.add_vars(na, 0, np.where(back, 0, 1), "B", "z")
         for i in range(m):
             # c_n + d_n - u = p, d_n = G_n^T r - J_n q
             idx, val = [self.c[i, 0], self.u[i]], [1.0, -1.0]
@@ -301,6 +318,8 @@ class ExactProblem:
             for a in range(R.shape[1]):  # R^T q - v = R^T q_ref
                 idx, val = self.extend([self.v[a]], [-1.0], self.q, R[:, a])
                 M.add_constraint(idx, val, "==", float(ref[a]), f"transmission{a}")
+                if back[a]:
+                    continue  # f = f_c by its bounds, v free: no lock
                 M.add_indicator(self.z[a], [self.v[a]], [1.0], "<=", 0.0, 1, f"locked{a}")
                 if self.fc is None:
                     M.add_indicator(self.z[a], [self.f[a]], [1.0], "<=", float(fc[a]), 0,
@@ -448,7 +467,8 @@ class ExactProblem:
         if self.hand is not None:
             q, f, z = x[self.q], x[self.f], np.round(x[self.z]) == 1
             fc = self.hand[1] if self.fc is None else x[self.fc]
-            at = at or bool(np.any(x[self.v] >= 0.99 * self.bounds.motion))
+            moved = np.where(self.backdrivable, 0.0, x[self.v])  # a free transmission: no bound
+            at = at or bool(np.any(moved >= 0.99 * self.bounds.motion))
             at = at or bool(np.any(f - fc >= 0.99 * self.bounds.excess))
         return ExactPoint(c, x[self.r], q, f, np.round(x[self.y]) == 1, z, at, x)
 

@@ -246,13 +246,18 @@ def test_toy_object_geom_order():
         assert np.all(g.forces[:, 0] > 0)
 
 
-def test_nonlinear_coupling_refused():
+def test_nonlinear_coupling_linearized():
+    """r2 = 0.5 r1 + 0.1 r1^2 enters through its derivative at the state: T[r2, r1] =
+    0.5 + 0.2 r1 (a small-motion model, as for a four-bar's connect equality)."""
     xml = TOY.replace("OBJECT", BOX).replace('polycoef="0 0.5 0 0 0"', 'polycoef="0 0.5 0.1 0 0"')
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
+    r1 = model.joint("r1").qposadr[0]
+    data.qpos[r1] = 0.3
     mujoco.mj_forward(model, data)
-    with pytest.raises(GraspError, match="nonlinear"):
-        hand_coordinates(model, data)
+    _, T, names = hand_coordinates(model, data)
+    assert names == ["lslide", "r1"]
+    assert T[2, 1] == pytest.approx(0.5 + 0.2 * 0.3, rel=1e-9)
 
 
 # -- the thesis scenes ------------------------------------------------------------------
