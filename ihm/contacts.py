@@ -38,8 +38,11 @@ points (a pad on a box face) costs the 3D solvers time exponential in the contac
 Each patch (contacts of one hand body and object body with normals within 1e-3 rad) is
 reduced to at most ``patch_points`` points, chosen farthest first (the two farthest
 apart, then the one farthest from them). A dropped point's MuJoCo force is added to the
-nearest kept point (the object residual reports the moment this moves). Its effect on
-the answers is measured in ``docs/linkage.md``.
+nearest kept point, and the kept forces are then corrected (least change, pseudo-inverse)
+to carry the patch's whole wrench: exactly with three or more points, so both
+equilibria still hold; with two, the moment about the patch's in-plane axis across the
+line is lost (the residuals show it). Its effect on the answers is measured in
+``docs/linkage.md``.
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
-from .handmodel import HandModel, HandModelError, hand_model
+from .handmodel import HandModel, HandModelError, hand_joints, hand_model
 
 __all__ = [
     "HandModelError",
@@ -272,6 +275,7 @@ def grasp_from_mujoco(
         raise GraspError(f"hand_rtol must be a finite number > 0, got {hand_rtol!r}")
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
+    hand_joints(model, in_obj)  # a ball or free joint in the hand: refused before anything
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
@@ -390,6 +394,11 @@ def grasp_from_mujoco(
     return grasp
 
 
+def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``[v]_x``: ``_skew(v) @ f == cross(v, f)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
 class HandModelWarning(UserWarning):
     """An element of the hand that the grasp model leaves out (named in the message)."""
 
@@ -427,5 +436,15 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
             near["force_world"] = near["force_world"] + g["force_world"]
             near["ids"] = near["ids"] + g["ids"]
             near["mu"] = min(near["mu"], g["mu"])
+        # keep the patch's wrench: f = f0 + A^+ (W - A f0), A the kept points' wrench map
+        centre = pts.mean(axis=0)
+        forces = np.array([g["force_world"] for g in p])
+        W = np.r_[forces.sum(axis=0), np.cross(pts - centre, forces).sum(axis=0)]
+        A = np.vstack([np.hstack([np.eye(3)] * keep),
+                       np.hstack([_skew(pts[k] - centre) for k in chosen])])  # fmt: skip
+        f0 = np.concatenate([g["force_world"] for g in kept])
+        f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
+        for k, g in enumerate(kept):
+            g["force_world"] = f[3 * k : 3 * k + 3]
         out.extend(kept)
     return out

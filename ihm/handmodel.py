@@ -144,7 +144,9 @@ def efc_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float
     return dense
 
 
-def _hand_joints(model: mujoco.MjModel, in_obj: NDArray[np.bool_]) -> list[int]:
+def hand_joints(model: mujoco.MjModel, in_obj: NDArray[np.bool_]) -> list[int]:
+    """Joint ids outside the object's subtree (``in_obj``: (nbody,) mask); a hand joint
+    that is not a hinge or slide raises :class:`HandModelError` naming it."""
     joints, bad = [], []
     for j in range(model.njnt):
         if in_obj[model.jnt_bodyid[j]]:
@@ -213,7 +215,7 @@ def hand_model(
     """
     if servo not in ("nonbackdrivable", "force"):
         raise HandModelError(f"servo must be 'nonbackdrivable' or 'force', got {servo!r}")
-    joints = _hand_joints(model, in_obj)
+    joints = hand_joints(model, in_obj)
     dofs = np.array([model.jnt_dofadr[j] for j in joints], dtype=np.int64)
     jname = [_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
     hand = np.zeros(model.nv, dtype=bool)

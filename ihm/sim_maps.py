@@ -129,7 +129,8 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
         ratchet = scenes.transmission_ratchet(m, d)
         ratchet.stops = _STATE["stops"]
     try:
-        res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **kw)
+        res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet,
+                                   **{"check_rate": False, **kw})  # fmt: skip
     finally:
         if ratchet is not None:
             ratchet.release()

@@ -32,6 +32,7 @@ EXPERIMENTS: dict[str, str] = {
     "barrett_cube": "ihm.experiments.barrett:cube",
     "barrett_flask": "ihm.experiments.barrett:flask",
     "tendon_box": "ihm.experiments.tendon:tendon_box",
+    "linkage_box": "ihm.experiments.linkage:linkage_box",
 }
 
 

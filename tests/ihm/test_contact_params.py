@@ -8,9 +8,14 @@ import numpy as np
 import pytest
 
 import ihm
-from ihm.hands import barrett, four_finger, tendon_gripper
+from ihm.hands import barrett, four_finger, linkage_gripper, tendon_gripper
 
-HANDS = {"barrett": barrett, "four_finger": four_finger, "tendon": tendon_gripper}
+HANDS = {
+    "barrett": barrett,
+    "four_finger": four_finger,
+    "tendon": tendon_gripper,
+    "linkage": linkage_gripper,
+}
 
 
 @pytest.mark.parametrize("scene", ihm.available_scenes())
