@@ -33,16 +33,25 @@ points lie within ``merge_tol`` [m] (default 0.1 mm) and whose normals agree wit
 the force their sum, the friction the smallest. Distinct points of a line or face
 contact stay distinct, as in the thesis' point-contact model.
 
-Reducing a patch (``reduce="extremes"``, optional): a face contact reported as many
-points (a pad on a box face) costs the 3D solvers time exponential in the contact count.
-Each patch (contacts of one hand body and object body with normals within 1e-3 rad) is
-reduced to at most ``patch_points`` points, chosen farthest first (the two farthest
-apart, then the one farthest from them). A dropped point's MuJoCo force is added to the
-nearest kept point, and the kept forces are then corrected (least change, pseudo-inverse)
-to carry the patch's whole wrench: exactly with three or more points, so both
-equilibria still hold; with two, the moment about the patch's in-plane axis across the
-line is lost (the residuals show it). Its effect on the answers is measured in
-``docs/linkage.md``.
+Reducing a patch (optional): a face contact reported as many points (a pad on a box
+face) costs the 3D solvers time exponential in the contact count. A patch is the
+contacts of one hand body and object body with normals within 1e-3 rad.
+
+* ``reduce="line"``: each patch to two points on the line through its centre of
+  pressure (where its normal forces have no in-plane moment) along its longest extent
+  (principal axis), where that line leaves the patch (the convex hull of its points).
+  The two forces carry the patch's whole wrench exactly (coplanar points), so both
+  equilibria hold with MuJoCo's forces. Torsional friction about the normal then has
+  the lever of the line's half-length only (the patch's width in the other direction
+  is lost: conservative). A patch of collinear points is kept as it is.
+* ``reduce="extremes"``: at most ``patch_points`` of MuJoCo's points, chosen farthest
+  first (the two farthest apart, then the one farthest from them). A dropped point's
+  force is added to the nearest kept point, then the kept forces are corrected (least
+  change, pseudo-inverse) to carry the patch's wrench: exactly with three or more
+  points; with two, the in-plane moment across their line is lost (the residuals show
+  it, and the hand check may refuse the grasp).
+
+The effect of each reduction on the answers is measured in ``docs/linkage.md``.
 """
 
 from __future__ import annotations
@@ -234,6 +243,7 @@ def grasp_from_mujoco(
     patch_points: int = 3,
     backdrivable: bool | Iterable[str] | None = None,
     servo: str = "nonbackdrivable",
+    stop_gap: float = 0.0,
     hand_rtol: float = 0.02,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
@@ -241,11 +251,12 @@ def grasp_from_mujoco(
     One contact per active MuJoCo contact between the object's subtree and any
     other body (the hand; a static body counts as a fixed finger with zero
     Jacobian rows), duplicates merged and patches optionally reduced (module
-    docstring). Friction is MuJoCo's sliding friction of the contact
+    docstring; ``reduce``: None, ``"line"`` or ``"extremes"`` with ``patch_points``).
+    Friction is MuJoCo's sliding friction of the contact
     (``contact.friction[0]``; 0 for a frictionless ``condim=1`` contact; ``condim``
     4 or 6, with torsional or rolling friction, is refused). The hand's equalities,
     limits, springs and saturated actuators are modelled as :mod:`ihm.handmodel`
-    says (``backdrivable``, ``servo`` are passed to it); ``grasp.elements`` lists
+    says (``backdrivable``, ``servo``, ``stop_gap`` are passed to it); ``grasp.elements`` lists
     each, ``grasp.commands`` holds ``f_c`` per column of ``R`` (actuators: their force
     at the state; stops: 0; constant torques: the torque).
 
@@ -267,8 +278,8 @@ def grasp_from_mujoco(
     """
     if not (isinstance(merge_tol, (int, float)) and np.isfinite(merge_tol) and merge_tol >= 0):
         raise GraspError(f"merge_tol must be a finite number >= 0 [m], got {merge_tol!r}")
-    if reduce not in (None, "extremes"):
-        raise GraspError(f"reduce must be None or 'extremes', got {reduce!r}")
+    if reduce not in (None, "extremes", "line"):
+        raise GraspError(f"reduce must be None, 'extremes' or 'line', got {reduce!r}")
     if not isinstance(patch_points, (int, np.integer)) or patch_points < 1:
         raise GraspError(f"patch_points must be an integer >= 1, got {patch_points!r}")
     if not (np.isfinite(hand_rtol) and hand_rtol > 0):
@@ -327,10 +338,10 @@ def grasp_from_mujoco(
             f"no active contact between body {object_body!r} and the hand "
             f"({data.ncon} MuJoCo contacts in all); settle the grasp first"
         )
-    if reduce == "extremes":
-        groups = _reduce_patches(groups, patch_points)
+    if reduce is not None:
+        groups = _reduce_patches(groups, 0 if reduce == "line" else patch_points)
 
-    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
+    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo, stop_gap=stop_gap,
                     object_contacts=[i for g in groups for i in g["ids"]])  # fmt: skip
     hand_dofs, T = hm.dofs, hm.T
     m = len(groups)
@@ -403,9 +414,63 @@ class HandModelWarning(UserWarning):
     """An element of the hand that the grasp model leaves out (named in the message)."""
 
 
+def _patch_wrench(
+    pts: NDArray[np.float64], forces: NDArray[np.float64], centre: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The wrench ``(f, torque about centre)`` of forces (k, 3) at points (k, 3)."""
+    return np.r_[forces.sum(axis=0), np.cross(pts - centre, forces).sum(axis=0)]
+
+
+def _wrench_map(pts: NDArray[np.float64], centre: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(6, 3k): stacked forces at ``pts`` to their wrench about ``centre``."""
+    return np.vstack(
+        [np.hstack([np.eye(3)] * len(pts)), np.hstack([_skew(q - centre) for q in pts])]
+    )
+
+
+def _line_patch(p: list[dict[str, Any]]) -> list[dict[str, Any]] | None:
+    """A patch as two contacts on the line through its centre of pressure along its longest
+    extent, at the patch's boundary (its points' convex hull), forces carrying the patch's
+    whole wrench (exact for coplanar points: about the centre of pressure the normal forces
+    have no in-plane moment). None for a patch whose points are collinear or unloaded."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    frame = p[0]["frame"]
+    pts = np.array([np.mean(g["pos"], axis=0) for g in p])
+    forces = np.array([g["force_world"] for g in p])
+    fn = forces @ frame[0]
+    if fn.sum() <= 0:
+        return None
+    centre = pts.mean(axis=0)
+    Y = (pts - centre) @ frame[1:].T  # in-plane coordinates (t1, t2)
+    try:
+        hull = ConvexHull(Y)
+    except (QhullError, ValueError):
+        return None  # collinear: a line contact already
+    cop = (fn @ pts) / fn.sum()
+    c2 = (cop - centre) @ frame[1:].T
+    u2 = np.linalg.svd(Y - Y.mean(axis=0), full_matrices=False)[2][0]
+    a, b = hull.equations[:, :2], hull.equations[:, 2]
+    au, slack = a @ u2, -(a @ c2 + b)  # a.(c + s u) + b <= 0  <=>  s (a.u) <= slack
+    s_hi = float(np.min(slack[au > 1e-12] / au[au > 1e-12]))
+    s_lo = float(np.max(slack[au < -1e-12] / au[au < -1e-12]))
+    u3 = u2 @ frame[1:]
+    ends = np.array([cop + s_lo * u3, cop + s_hi * u3])
+    W = _patch_wrench(pts, forces, centre)
+    A = _wrench_map(ends, centre)
+    f0 = np.tile(forces.sum(axis=0) / 2, 2)
+    f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
+    ids = [i for g in p for i in g["ids"]]
+    mu = min(g["mu"] for g in p)
+    return [dict(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
+                 force_world=f[3 * k : 3 * k + 3]) for k in range(2)]  # fmt: skip
+
+
 def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, Any]]:
     """Each patch (same hand and object body, normals within 1e-3 rad) to at most ``keep``
-    contacts, farthest first; a dropped contact's force goes to the nearest kept one."""
+    contacts, farthest first; a dropped contact's force goes to the nearest kept one and
+    the kept forces are corrected to carry the patch's wrench. ``keep == 0``: the line
+    through the centre of pressure (:func:`_line_patch`)."""
     patches: list[list[dict[str, Any]]] = []
     for g in groups:
         for p in patches:
@@ -416,14 +481,20 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
             patches.append([g])
     out = []
     for p in patches:
-        if len(p) <= keep:
+        if keep == 0 and len(p) > 2:
+            line = _line_patch(p)
+            if line is not None:
+                out.extend(line)
+                continue
+        n_keep = 2 if keep == 0 else keep
+        if len(p) <= n_keep:
             out.extend(p)
             continue
         pts = np.array([np.mean(g["pos"], axis=0) for g in p])
         dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
         i, j = np.unravel_index(np.argmax(dist), dist.shape)
         chosen = [int(i), int(j)]
-        while len(chosen) < keep:
+        while len(chosen) < n_keep:
             far = dist[:, chosen].min(axis=1)
             far[chosen] = -1.0
             chosen.append(int(np.argmax(far)))
@@ -438,10 +509,8 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
             near["mu"] = min(near["mu"], g["mu"])
         # keep the patch's wrench: f = f0 + A^+ (W - A f0), A the kept points' wrench map
         centre = pts.mean(axis=0)
-        forces = np.array([g["force_world"] for g in p])
-        W = np.r_[forces.sum(axis=0), np.cross(pts - centre, forces).sum(axis=0)]
-        A = np.vstack([np.hstack([np.eye(3)] * keep),
-                       np.hstack([_skew(pts[k] - centre) for k in chosen])])  # fmt: skip
+        W = _patch_wrench(pts, np.array([g["force_world"] for g in p]), centre)
+        A = _wrench_map(pts[chosen], centre)
         f0 = np.concatenate([g["force_world"] for g in kept])
         f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
         for k, g in enumerate(kept):

@@ -67,6 +67,7 @@ _EQ_KIND = {int(_EQ.mjEQ_CONNECT): "connect", int(_EQ.mjEQ_WELD): "weld",
             int(_EQ.mjEQ_JOINT): "joint", int(_EQ.mjEQ_TENDON): "tendon"}  # fmt: skip
 RANK_RTOL = 1e-9  # singular values below this times the largest are zero (equality rank)
 FORCE_ATOL = 1e-9  # a constraint or passive force below this [N, N m] is no force
+NEAR_LIMIT = 0.05  # a joint this close to a limit [rad or m] without a stop gets a warning
 
 
 class HandModelError(GraspError):
@@ -203,6 +204,7 @@ def hand_model(
     backdrivable: bool | Iterable[str] | None = None,
     servo: str = "nonbackdrivable",
     object_contacts: Iterable[int] = (),
+    stop_gap: float = 0.0,
 ) -> HandModel:
     """The hand's coordinates, transmission, stops and constant torques (module doc).
 
@@ -211,7 +213,8 @@ def hand_model(
     or the names of the backdrivable actuators. ``servo``: how an unsaturated position
     servo enters ("nonbackdrivable" or "force"). ``object_contacts``: MuJoCo contact
     indices between the object and the hand (the grasp's; other contacts on the hand
-    are reported as unmodelled).
+    are reported as unmodelled). ``stop_gap`` [rad or m]: a joint limit this close that
+    carries no force yet is a stop too (engaged by a motion of at most ``stop_gap``).
     """
     if servo not in ("nonbackdrivable", "force"):
         raise HandModelError(f"servo must be 'nonbackdrivable' or 'force', got {servo!r}")
@@ -336,6 +339,31 @@ def hand_model(
         elements.append(HandElement(f"limit:{lname}", "stop", "nonbackdrivable", float(frc[r]),
                                     0.0, "one-way stop, command 0"))  # fmt: skip
 
+    # -- limits within stop_gap: stops engaged by a small motion -------------------------------
+    active_joints = {int(eid[r]) for r in np.flatnonzero(typ == int(_C.mjCNSTR_LIMIT_JOINT))
+                     if frc[r] > FORCE_ATOL}  # fmt: skip
+    near: list[str] = []
+    for k, j in enumerate(joints):
+        if not model.jnt_limited[j] or j in active_joints:
+            continue
+        q = float(data.qpos[model.jnt_qposadr[j]])
+        lo, hi = model.jnt_range[j]
+        for bound, sign in ((lo, 1.0), (hi, -1.0)):
+            gap = sign * (q - bound)  # >= 0 inside the range
+            col = T.T @ (sign * np.eye(len(joints))[k])
+            if np.linalg.norm(col) == 0:
+                continue
+            if gap <= stop_gap:
+                cols.append(col)
+                f_c.append(0.0)
+                f_act.append(0.0)
+                back.append(False)
+                note = f"within stop_gap: {gap:.3g} from its limit"
+                elements.append(HandElement(f"limit:{jname[k]}", "stop", "nonbackdrivable",
+                                            0.0, 0.0, note))  # fmt: skip
+            elif gap <= NEAR_LIMIT:
+                near.append(f"{jname[k]} ({gap:.3g} from its limit)")
+
     # -- constant torques ------------------------------------------------------------------
     def constant(name: str, kind: str, tau_full: NDArray[np.float64], note: str) -> None:
         tau = T.T @ tau_full
@@ -387,6 +415,24 @@ def hand_model(
                else _name(model, obj, int(eid[r])))  # fmt: skip
         warns.append(f"dry friction (frictionloss) of {who}: {frc[r]:.3g}")
         unmodelled += T.T @ (E[r, dofs] * frc[r])
+    # a motion that no actuator and no loaded stop takes part in, held by springs alone
+    kinds = [e.kind for e in elements if e.kind != "equality" and e.model != "merged"]
+    holding = [c for c, kd, fa in zip(cols, kinds, f_act, strict=True)
+               if kd == "actuator" or (kd == "stop" and fa > FORCE_ATOL)]  # fmt: skip
+    free = _null(np.stack(holding, axis=0)) if holding else np.eye(T.shape[1])
+    spring_cols = [(c, n) for c, kd, n in zip(cols, kinds, _column_names(elements), strict=True)
+                   if kd == "spring"]  # fmt: skip
+    for c, n in spring_cols:
+        if free.shape[1] and np.linalg.norm(free.T @ c) > 1e-6 * np.linalg.norm(c):
+            warns.append(
+                f"{n}: a passive motion of the hand is held by this spring alone (no actuator, "
+                "no loaded stop): the model keeps the spring's torque constant (its stiffness "
+                "is not modelled), so it calls a load on that motion unresisted where MuJoCo "
+                "moves the joint until the spring or a stop holds it"
+            )
+    for what in near:
+        warns.append(f"joint {what}: a stop that a small motion engages is not in the model "
+                     "(the grasp model is first order); pass stop_gap to include it")  # fmt: skip
     R = np.stack(cols, axis=1) if cols else np.zeros((len(ind), 0))
     big = float(np.abs(R @ np.array(f_act)).max(initial=0.0)) if cols else 0.0
     for what, vec in (("fluid", data.qfrc_fluid), ("damping (motion)", data.qfrc_damper)):
@@ -408,6 +454,17 @@ def hand_model(
         warnings=warns,
         unmodelled=unmodelled,
     )
+
+
+def _null(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Orthonormal basis (columns) of the null space of ``A`` (rows: constraints)."""
+    _, sv, vt = np.linalg.svd(A)
+    rank = int(np.sum(sv > RANK_RTOL * max(1.0, float(sv.max(initial=0.0)))))
+    return vt[rank:].T
+
+
+def _column_names(elements: list[HandElement]) -> list[str]:
+    return [e.name for e in elements if e.kind != "equality" and e.model != "merged"]
 
 
 def _index(elements: list[HandElement], name: str) -> int:

@@ -9,9 +9,11 @@ measured, for the six axis force directions ``+-x, +-y, +-z`` (world = object ax
 with the box's weight as base load:
 
 * predicted resistance: ``MaxDisturbance`` by ``refinement`` on the grasp read off MuJoCo
-  (:func:`ihm.grasp_from_mujoco`: linkages folded, stops, constant forces), for three
-  contact sets: all contacts after merging (12), and each pad's patch reduced to its 3
-  and its 2 extreme points (``reduce="extremes"``), each query within ``TIME_LIMIT_S``;
+  (:func:`ihm.grasp_from_mujoco`: linkages folded, stops, constant forces), for four
+  contact sets: each pad's patch as two points on the line through its centre of
+  pressure (``reduce="line"``, 4 contacts), reduced to its 2 and 3 extreme points
+  (``reduce="extremes"``, 4 and 6), and all contacts after merging (12), each query
+  within ``TIME_LIMIT_S``;
 * the weight alone (``Existence``): never "unstable" where MuJoCo holds the box;
 * simulated resistance (:func:`ihm.resistance.simulated_resistance`) with the scene's own
   solver settings (elliptic cone, impratio 100, noslip), and with impratio 10 (MuJoCo
@@ -46,9 +48,10 @@ TIME_LIMIT_S = 30.0
 DIRECTIONS = {"+x": 0, "-x": 0, "+y": 1, "-y": 1, "+z": 2, "-z": 2}
 #: name -> grasp_from_mujoco options
 CONTACT_SETS: dict[str, dict[str, Any]] = {
-    "merged": {},
-    "extremes3": {"reduce": "extremes", "patch_points": 3},
+    "line": {"reduce": "line"},
     "extremes2": {"reduce": "extremes", "patch_points": 2},
+    "extremes3": {"reduce": "extremes", "patch_points": 3},
+    "merged": {},
 }
 
 
@@ -107,9 +110,9 @@ def simulate(direction: str, impratio: float | None = None) -> dict[str, Any]:
 
 
 def linkage_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
-    """Run the experiment (module docstring); ``quick`` uses the 3-point set only."""
+    """Run the experiment (module docstring); ``quick`` uses the line set only."""
     rows: list[dict[str, Any]] = []
-    sets = ["extremes3"] if quick else list(CONTACT_SETS)
+    sets = ["line"] if quick else list(CONTACT_SETS)
     sim: dict[tuple[str, float], float] = {}
     for imp in (None, 10.0):
         for dname in DIRECTIONS:

@@ -128,21 +128,37 @@ def test_merged_seam_contacts_sum_mujocos_forces(settled):
     assert g.m == data.ncon - len(merged)
 
 
-def test_reduced_patches_keep_the_patch_wrench(settled):
+@pytest.mark.parametrize("opts", [{"reduce": "line"}, {"reduce": "extremes", "patch_points": 3}])
+def test_reduced_patches_keep_the_patch_wrench(settled, opts):
+    """A reduced pad patch carries the same wrench as MuJoCo's points: both equilibria
+    still hold with the reduced forces (line: 2 points per pad through the centre of
+    pressure; extremes: 3 of MuJoCo's points per pad)."""
     model, data, g = settled
-    g3 = grasp_from_mujoco(model, data, reduce="extremes", patch_points=3)
-    assert g3.m == 6
-    assert np.allclose(g3.forces_world().sum(axis=0), g.forces_world().sum(axis=0), atol=1e-9)
-    assert g3.hand_residual < 1e-6
-    assert g3.equilibrium_residuals()["object"] < 1e-6 * np.abs(g.forces).max()
+    gr = grasp_from_mujoco(model, data, **opts)
+    assert gr.m == {"line": 4, "extremes": 6}[opts["reduce"]]
+    load = np.abs(g.forces).max()
+    assert np.allclose(gr.forces_world().sum(axis=0), g.forces_world().sum(axis=0), atol=1e-9)
+    assert gr.hand_residual < 1e-6
+    assert gr.equilibrium_residuals()["object"] < 1e-6 * load
+    # the patch's moment about the object origin is kept too
+    mom = np.cross(gr.points, gr.forces_world() @ gr.object_mat).sum(axis=0)
+    ref = np.cross(g.points, g.forces_world() @ g.object_mat).sum(axis=0)
+    assert np.allclose(mom, ref, atol=1e-6 * load * 0.03)
+    if opts["reduce"] == "line":  # each pad's two points lie on its patch, on one line
+        for body in np.unique(gr.hand_bodies):
+            full = g.points_world()[g.hand_bodies == body]
+            ends = gr.points_world()[gr.hand_bodies == body]
+            lo, hi = full.min(axis=0) - 1e-4, full.max(axis=0) + 1e-4  # pads tilt ~1e-3 rad
+            assert np.all((ends >= lo) & (ends <= hi))
+            assert np.linalg.norm(ends[0] - ends[1]) > 0.5 * np.ptp(full, axis=0).max()
 
 
 def test_weight_alone_is_stable_and_answers_match_mujoco(settled):
-    """refinement on the 2-extreme-point grasp: the weight alone is stable (MuJoCo holds
-    the box), and the pushes along +x (friction) and +z (friction dragging the pads up
-    their path) agree with MuJoCo's simulated resistance within 10 %."""
+    """refinement on the line-reduced grasp (4 contacts): the weight alone is stable
+    (MuJoCo holds the box), and the pushes along +x (friction) and +z (friction dragging
+    the pads up their path) agree with MuJoCo's simulated resistance within 10 %."""
     model, data, _ = settled
-    g = grasp_from_mujoco(model, data, reduce="extremes", patch_points=2)
+    g = grasp_from_mujoco(model, data, reduce="line")
     assert g.m == 4
     w = solve(g, Existence(g.gravity_wrench, commands=g.commands), method="refinement",
               time_limit=30)  # fmt: skip
