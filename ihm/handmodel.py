@@ -351,8 +351,8 @@ def hand_model(
         for bound, sign in ((lo, 1.0), (hi, -1.0)):
             gap = sign * (q - bound)  # >= 0 inside the range
             col = T.T @ (sign * np.eye(len(joints))[k])
-            if np.linalg.norm(col) == 0:
-                continue
+            if np.linalg.norm(col) == 0 or _blocked(col, cols, back):
+                continue  # locked by the equalities, or a nonbackdrivable column holds it
             if gap <= stop_gap:
                 cols.append(col)
                 f_c.append(0.0)
@@ -454,6 +454,14 @@ def hand_model(
         warnings=warns,
         unmodelled=unmodelled,
     )
+
+
+def _blocked(col: NDArray[np.float64], cols: list[NDArray[np.float64]], back: list[bool]) -> bool:
+    """A nonbackdrivable column (actuator or stop) acts along ``col``, the same way: the
+    motion a stop along ``col`` would block is blocked already."""
+    n = np.linalg.norm(col)
+    return any(not b and c @ col >= (1 - 1e-9) * n * np.linalg.norm(c)
+               for c, b in zip(cols, back, strict=True))  # fmt: skip
 
 
 def _null(A: NDArray[np.float64]) -> NDArray[np.float64]:

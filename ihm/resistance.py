@@ -153,6 +153,7 @@ def simulated_resistance(
     slip_factor: float = 30.0,
     check_rate: bool = True,
     rate_tol: float = 0.2,
+    stop_rule: str = "slip",
 ) -> Resistance:
     """Ramp a load along ``direction`` on ``body`` until it slips (module doc).
 
@@ -176,6 +177,11 @@ def simulated_resistance(
     check_rate : repeat the ramp :data:`RATE_CHECK_FACTOR` times slower from a copy of the
         state and warn (:class:`RateDependenceWarning`) if the answers differ by more than
         ``rate_tol`` (relative to ``value``). Costs up to 4x the ramp's time again.
+    stop_rule : ``"slip"`` (default: the slip rule, module doc) or ``"distance"`` (the
+        rule before it: ``value`` is the largest load held before the object moved
+        ``max_shift`` or turned ``max_turn``, creep included; the thesis experiments in
+        :mod:`ihm.experiments` that predate the slip rule keep it, so that their
+        documented figures stay reproducible).
     """
     w = np.asarray(direction, dtype=float).reshape(-1)
     if w.shape != (6,) or not np.isfinite(w).all():
@@ -197,6 +203,8 @@ def simulated_resistance(
                          f"max_turn={max_turn!r}, settle_s={settle_s!r}")  # fmt: skip
     if not slip_factor > 1:
         raise GraspError(f"slip_factor must be > 1, got {slip_factor!r}")
+    if stop_rule not in ("slip", "distance"):
+        raise GraspError(f"stop_rule must be 'slip' or 'distance', got {stop_rule!r}")
     if not rate_tol > 0:
         raise GraspError(f"rate_tol must be > 0, got {rate_tol!r}")
     if not isinstance(check_rate, (bool, np.bool_)):
@@ -220,7 +228,9 @@ def simulated_resistance(
         "settle_s": float(settle_s),
         "ratchet": ratchet is not None,
         "stop_on_new_contact": bool(stop_on_new_contact),
-        "stop_rule": (
+        "stop_rule": "distance: the largest load held before max_shift or max_turn"
+        if stop_rule == "distance"
+        else (
             f"slip: {SLIP_WINDOW_S * 1e3:g} ms speed > {slip_factor:g} x the mean speed over "
             f"[t/4, t/2] (floor {SLIP_FLOOR:g}), in max_shift/s or max_turn/s, until it falls "
             f"below 1/{SLIP_DROP:g} of its peak; a slip reaching max_shift or max_turn is the "
@@ -230,8 +240,9 @@ def simulated_resistance(
     }
     start = copy.copy(data) if check_rate else None
     stops0 = ratchet.stops.copy() if check_rate and ratchet is not None else None
+    factor = math.inf if stop_rule == "distance" else float(slip_factor)  # inf: never a slip
     args = (model, w, float(cap), float(max_shift), float(max_turn), float(settle_s), bid,
-            bool(stop_on_new_contact), float(slip_factor))  # fmt: skip
+            bool(stop_on_new_contact), factor)  # fmt: skip
     res = _ramp(data, float(rate), ratchet, *args)
     res.conditions = conditions
     if not check_rate:

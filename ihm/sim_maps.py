@@ -129,8 +129,8 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
         ratchet = scenes.transmission_ratchet(m, d)
         ratchet.stops = _STATE["stops"]
     try:
-        res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet,
-                                   **{"check_rate": False, **kw})  # fmt: skip
+        opts = {"check_rate": False, "stop_rule": "distance", **kw}  # the maps' documented rule
+        res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **opts)
     finally:
         if ratchet is not None:
             ratchet.release()

@@ -188,7 +188,8 @@ def _simulate(model, data, ratchet, direction_obj: np.ndarray, cap: float, at_co
     if not at_com:
         tq = tq + np.cross(-model.body_ipos[b], f)
     w = np.r_[R @ f, R @ tq]
-    return simulated_resistance(model, data, w, cap=cap, ratchet=ratchet, check_rate=False)
+    return simulated_resistance(model, data, w, cap=cap, ratchet=ratchet, check_rate=False,
+                                stop_rule="distance")  # fmt: skip
 
 
 def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:

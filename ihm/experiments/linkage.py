@@ -104,9 +104,17 @@ def simulate(direction: str, impratio: float | None = None) -> dict[str, Any]:
     scenes.settle(model, data, scenes.default_preload(model))
     t0 = time.perf_counter()
     res = simulated_resistance(model, data, _unit(direction), cap=CAP_N)
-    return {"value": float(res.value), "reason": res.reason, "capped": bool(res.capped),
-            "creep_m": float(getattr(res, "creep_shift", np.nan)),
-            "impratio": float(model.opt.impratio), "seconds": time.perf_counter() - t0}  # fmt: skip
+    rc = res.rate_check or {}
+    return {
+        "value": float(res.value),
+        "reason": res.reason,
+        "capped": bool(res.capped),
+        "creep_m": float(res.creep_shift),
+        "slow_value": float(rc.get("slow_value", np.nan)),
+        "rate_difference": float(rc.get("relative_difference", np.nan)),
+        "impratio": float(model.opt.impratio),
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def linkage_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:

@@ -151,7 +151,8 @@ def _simulate(commands: tuple[float, float], sign: float) -> dict[str, Any]:
     axis_world = grasp.object_mat[:, 0]
     direction = np.r_[0.0, 0.0, 0.0, sign * axis_world]
     res = simulated_resistance(model, data, direction, cap=TORQUE_CAP_NM,
-                               ratchet=scenes.last_ratchet, check_rate=False)  # fmt: skip
+                               ratchet=scenes.last_ratchet, check_rate=False,
+                               stop_rule="distance")  # fmt: skip
     turned = res.trace[res.trace[:, 2] > ONSET_TURN_RAD]
     onset = float(turned[0, 0]) if len(turned) else float(res.value)
     return {

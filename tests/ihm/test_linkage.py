@@ -171,7 +171,7 @@ def test_weight_alone_is_stable_and_answers_match_mujoco(settled):
         assert sol.status == "solved"
         assert max(sol.residuals().values()) < 1e-4 * (1 + sol.value)
         m2, d2 = load_scene(SCENE)
-        sim = simulated_resistance(m2, d2, u, cap=100)
+        sim = simulated_resistance(m2, d2, u, cap=100, check_rate=False)
         assert sol.value == pytest.approx(sim.value, rel=0.1), (axis, sol.value, sim.value)
 
 

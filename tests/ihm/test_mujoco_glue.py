@@ -101,11 +101,6 @@ def case(request):
     return _settled(request.param)
 
 
-@pytest.fixture(scope="module", params=SCENES)
-def scene(request):
-    return _settled(request.param)
-
-
 # -- finite differences through MuJoCo --------------------------------------------------
 def _material_points(model, data, body_ids, points_world, qpos):
     """World positions, at configuration ``qpos``, of the points ``points_world``
@@ -184,7 +179,7 @@ def _check_statics(g: SceneGrasp) -> None:
     assert res["hand"] <= 1e-3 * load, res
     # the same, written out: G c + w_g = 0 and J^T c = R f
     assert np.allclose(g.G @ c, -g.gravity_wrench, atol=1e-3 * load)
-    assert np.allclose(g.J.T @ c, g.R @ g.commands, atol=1e-3 * load)
+    assert np.allclose(g.J.T @ c, g.R @ g.actuator_forces, atol=1e-3 * load)
 
 
 def _check_frames(model, data, g: SceneGrasp) -> None:
@@ -265,13 +260,23 @@ def test_scenes_exist():
     assert set(THESIS_SCENES) <= set(SCENES)
 
 
-def test_scene_at_rest_without_joint_limits(scene):
-    """At rest, and no joint limit takes load (else J^T c = R f would not hold)."""
-    model, data, _ = scene
+@pytest.mark.parametrize("name", SCENES)
+def test_scene_at_rest_limits_are_stops(name):
+    """At rest; in the thesis' scenes no joint limit takes load; where one does (the
+    linkage gripper's couplers) it is a stop column of R carrying MuJoCo's limit force,
+    so that J^T c = R f holds."""
+    model, data, g = _settled(name)
     assert np.abs(data.qvel).max() < 1e-3
     limit = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
     rows = np.flatnonzero(data.efc_type[: data.nefc] == limit)
-    assert np.allclose(data.efc_force[rows], 0.0, atol=1e-9)
+    loaded = rows[data.efc_force[rows] > 1e-9]
+    if name in THESIS_SCENES:
+        assert loaded.size == 0
+    col = dict(zip(g.actuator_names, g.actuator_forces, strict=True))
+    for r in loaded:
+        assert col[f"limit:{model.joint(data.efc_id[r]).name}"] == pytest.approx(
+            data.efc_force[r], rel=1e-12
+        )
 
 
 # -- bad input --------------------------------------------------------------------------
