@@ -264,8 +264,13 @@ def settle(
     ratchet: Ratchet | None = None,
     force_tol: float = 0.05,
     object_body: str | None = "object",
+    command: str = "force",
 ) -> SettleInfo:
     """Close the hand with actuator forces ``commands`` until the grasp is at rest.
+
+    ``command="ctrl"`` takes ``commands`` as MuJoCo controls instead (``data.ctrl``: a
+    position servo's target position, a gripper's 0-255 closing command), set once;
+    steps 3 and 4's force rounds and force checks are skipped, the others are the same.
 
     Procedure (simulated time, ``model.opt.timestep`` per step):
 
@@ -315,7 +320,17 @@ def settle(
         raise SceneError("commands contain NaN or inf")
     if not (np.isfinite(force_tol) and force_tol > 0):
         raise SceneError(f"force_tol must be a finite number > 0, got {force_tol!r}")
-    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool)):
+    if command not in ("force", "ctrl"):
+        raise SceneError(f"command must be 'force' or 'ctrl', got {command!r}")
+    by_ctrl = command == "ctrl"
+    if by_ctrl:
+        lo_c, hi_c = model.actuator_ctrlrange.T
+        out = model.actuator_ctrllimited.astype(bool) & ((f_c < lo_c) | (f_c > hi_c))
+        if out.any():
+            a = int(np.flatnonzero(out)[0])
+            raise SceneError(f"actuator {model.actuator(a).name or a}: ctrl {f_c[a]:g} is "
+                             f"outside its ctrlrange [{lo_c[a]:g}, {hi_c[a]:g}]")  # fmt: skip
+    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool) & (not by_ctrl)):
         flo, fhi = model.actuator_forcerange[a]
         if fhi > flo and not (flo - 1e-9 <= f_c[a] <= fhi + 1e-9):
             raise SceneError(
@@ -328,9 +343,11 @@ def settle(
         bad = [model.actuator(a).name for a in np.flatnonzero(np.abs(G).sum(axis=1) < 1e-12)]
         raise SceneError(f"actuator(s) {bad} have zero gain; cannot command their force")
     feedback = np.abs(B[:, 1]) + np.abs(G[:, 1]) > 0  # force depends on length: rounds
+    if by_ctrl:
+        feedback[:] = False  # controls are set once: no force rounds
 
     def set_ctrl() -> None:
-        data.ctrl[:] = _commanded_ctrl(model, data, f_c, G, B)
+        data.ctrl[:] = f_c if by_ctrl else _commanded_ctrl(model, data, f_c, G, B)
 
     mujoco.mj_forward(model, data)
     set_ctrl()
@@ -363,7 +380,7 @@ def settle(
     pinned = model.actuator_ctrllimited.astype(bool) & (
         np.isclose(data.ctrl, lo) | np.isclose(data.ctrl, hi)
     )
-    bad = np.flatnonzero(pinned & (err > force_tol * (1 + np.abs(f_c))))
+    bad = np.flatnonzero(pinned & (err > force_tol * (1 + np.abs(f_c))) & (not by_ctrl))
     if bad.size:  # the command needs a ctrl beyond ctrlrange: it cannot be given
         a = int(bad[0])
         raise SceneError(
@@ -380,7 +397,9 @@ def settle(
         max_vel=vmax,
         commands=f_c,
         rounds=done_rounds,
-        force_error=float(np.abs(data.actuator_force - f_c).max()) if model.nu else 0.0,
+        force_error=float(np.abs(data.actuator_force - f_c).max())
+        if model.nu and not by_ctrl
+        else 0.0,
         contacts=int(data.ncon),
     )
 

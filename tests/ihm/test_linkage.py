@@ -252,3 +252,21 @@ def test_settle_raises_when_the_fingers_cannot_close():
         load_scene(SCENE, preload=[0.0], max_s=1.0)
     with pytest.raises(SceneError, match="outside its forcerange"):
         load_scene(SCENE, preload=[3.0])
+
+
+def test_settle_by_ctrl_closes_like_a_gripper_command(settled):
+    """command="ctrl": 255 is the gripper's "close" (the servo's target past the object):
+    the same saturated grasp as commanding the forcerange bound; ctrl 0 leaves the hand
+    open; a ctrl outside ctrlrange is refused."""
+    _, _, ref = settled
+    model, data = load_scene(SCENE, settle_grasp=False)
+    ihm.scenes.settle(model, data, [255.0], command="ctrl")
+    assert data.actuator_force[0] == pytest.approx(lg.FORCE_LIMIT)
+    g = grasp_from_mujoco(model, data)
+    assert g.m == ref.m
+    assert np.allclose(g.forces[:, 0], ref.forces[:, 0], rtol=1e-3, atol=1e-3)
+    with pytest.raises(SceneError, match="outside its ctrlrange"):
+        ihm.scenes.settle(model, data, [300.0], command="ctrl")
+    model, data = load_scene(SCENE, settle_grasp=False, gravity=False)
+    with pytest.raises(SceneError, match="fingers did not close"):
+        ihm.scenes.settle(model, data, [0.0], command="ctrl")
