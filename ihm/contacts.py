@@ -43,9 +43,12 @@ contacts of one hand body and object body with normals within 1e-3 rad.
   The two forces carry the patch's whole wrench exactly (coplanar points), so both
   equilibria hold with MuJoCo's forces. Torsional friction about the normal then has
   the lever of the line's half-length only (the patch's width in the other direction
-  is lost: conservative). A patch of collinear points is kept as it is.
+  is lost: conservative); where MuJoCo's state needs more torsion than that, a
+  :class:`HandModelWarning` says so (reduced forces outside the cone are checked for
+  either reduction). A strip narrower than 10 um is reduced to its ends.
 * ``reduce="extremes"``: at most ``patch_points`` of MuJoCo's points, chosen farthest
-  first (the two farthest apart, then the one farthest from them). A dropped point's
+  first (the two farthest apart, the one whose triangle with them holds the centre of
+  pressure deepest, then the farthest from those). A dropped point's
   force is added to the nearest kept point, then the kept forces are corrected (least
   change, pseudo-inverse) to carry the patch's wrench: exactly with three or more
   points; with two, the in-plane moment across their line is lost (the residuals show
@@ -160,6 +163,13 @@ class SceneGrasp(Grasp):
         hi[act] = np.inf if upper is None else np.broadcast_to(np.asarray(upper, float),
                                                                (int(act.sum()),))  # fmt: skip
         return lo, hi
+
+    def command_weights(self) -> NDArray[np.float64]:
+        """Weights for ``OptimalCommands(objective="weighted", weights=...)``: 1 per
+        actuator, 0 for every pinned column (stops, springs, weight), so that only the
+        commands one sets are minimised (the ``"max"`` objective would also count the
+        pinned columns' commands)."""
+        return self.hand.actuated.astype(float)
 
     def forces_world(self) -> NDArray[np.float64]:
         """Forces of the hand on the object in world coordinates, (m, 3) [N]."""
@@ -350,6 +360,21 @@ def grasp_from_mujoco(
     forces = np.einsum("mkj,mj->mk", frames_w, np.array([g["force_world"] for g in groups]))
     hand_geoms = np.array([g["pair"][0] for g in groups], dtype=np.int64)
     hand_bodies = model.geom_bodyid[hand_geoms].astype(np.int64)
+    if reduce is not None:  # can the reduced points carry MuJoCo's state?
+        mu = np.array([g["mu"] for g in groups])
+        tang = np.linalg.norm(forces[:, 1:], axis=1)
+        scale = 1e-6 * (1.0 + float(np.abs(forces).max()))
+        bad = np.flatnonzero((forces[:, 0] < -scale) | (tang > mu * forces[:, 0] + scale))
+        for k in bad:
+            warnings.warn(
+                f"grasp_from_mujoco(reduce={reduce!r}): the patch on "
+                f"{model.body(int(hand_bodies[k])).name} needs a force outside the friction "
+                f"cone at a reduced point (c_n {forces[k, 0]:.3g} N, |c_t| {tang[k]:.3g} N, mu "
+                f"{mu[k]:g}): the reduced grasp cannot carry MuJoCo's state (torsion about the "
+                "normal, or a centre of pressure outside the kept points); use more points",
+                HandModelWarning,
+                stacklevel=2,
+            )
 
     J = np.zeros((3 * m, T.shape[1]))
     jacp = np.zeros((3, model.nv))
@@ -405,6 +430,34 @@ def grasp_from_mujoco(
     return grasp
 
 
+def _third_point(p: list[dict[str, Any]], pts: NDArray[np.float64], two: list[int]) -> int:
+    """The point whose triangle with ``two`` holds the patch's centre of pressure deepest
+    (largest smallest barycentric coordinate, in the patch plane): the kept normal forces
+    can then stay >= 0."""
+    frame = p[0]["frame"]
+    fn = np.array([g["force_world"] for g in p]) @ frame[0]
+    cop = (fn @ pts) / fn.sum() if fn.sum() > 0 else pts.mean(axis=0)
+    Y, c = pts @ frame[1:].T, cop @ frame[1:].T
+    best, best_k = -np.inf, -1
+    for k in range(len(pts)):
+        if k in two:
+            continue
+        tri = np.vstack([Y[[two[0], two[1], k]].T, np.ones(3)])
+        if abs(np.linalg.det(tri)) < 1e-18:
+            continue  # collinear
+        lam = np.linalg.solve(tri, np.r_[c, 1.0])
+        if lam.min() > best:
+            best, best_k = float(lam.min()), k
+    if best_k < 0:  # all collinear: the farthest from the first two
+        far = np.linalg.norm(pts[:, None] - pts[two][None], axis=2).min(axis=1)
+        far[two] = -1.0
+        best_k = int(np.argmax(far))
+    return best_k
+
+
+THIN_PATCH_M = 1e-5  # a patch narrower than this [m rms] is a strip for reduce="line"
+
+
 def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """``[v]_x``: ``_skew(v) @ f == cross(v, f)``."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -443,17 +496,22 @@ def _line_patch(p: list[dict[str, Any]]) -> list[dict[str, Any]] | None:
         return None
     centre = pts.mean(axis=0)
     Y = (pts - centre) @ frame[1:].T  # in-plane coordinates (t1, t2)
-    try:
-        hull = ConvexHull(Y)
-    except (QhullError, ValueError):
-        return None  # collinear: a line contact already
     cop = (fn @ pts) / fn.sum()
     c2 = (cop - centre) @ frame[1:].T
-    u2 = np.linalg.svd(Y - Y.mean(axis=0), full_matrices=False)[2][0]
-    a, b = hull.equations[:, :2], hull.equations[:, 2]
-    au, slack = a @ u2, -(a @ c2 + b)  # a.(c + s u) + b <= 0  <=>  s (a.u) <= slack
-    s_hi = float(np.min(slack[au > 1e-12] / au[au > 1e-12]))
-    s_lo = float(np.max(slack[au < -1e-12] / au[au < -1e-12]))
+    _, sv, vt = np.linalg.svd(Y - Y.mean(axis=0), full_matrices=False)
+    u2 = vt[0]
+    along = (Y - c2) @ u2
+    if sv[1] <= THIN_PATCH_M * np.sqrt(len(Y)):  # a strip: its extent along the line
+        s_lo, s_hi = float(along.min()), float(along.max())
+    else:
+        try:
+            hull = ConvexHull(Y)
+        except (QhullError, ValueError):
+            return None
+        a, b = hull.equations[:, :2], hull.equations[:, 2]
+        au, slack = a @ u2, -(a @ c2 + b)  # a.(c + s u) + b <= 0  <=>  s (a.u) <= slack
+        s_hi = float(np.min(slack[au > 1e-12] / au[au > 1e-12]))
+        s_lo = float(np.max(slack[au < -1e-12] / au[au < -1e-12]))
     u3 = u2 @ frame[1:]
     ends = np.array([cop + s_lo * u3, cop + s_hi * u3])
     W = _patch_wrench(pts, forces, centre)
@@ -494,6 +552,8 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
         dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
         i, j = np.unravel_index(np.argmax(dist), dist.shape)
         chosen = [int(i), int(j)]
+        if n_keep >= 3:  # the third: the triangle that best contains the centre of pressure
+            chosen.append(_third_point(p, pts, chosen))
         while len(chosen) < n_keep:
             far = dist[:, chosen].min(axis=1)
             far[chosen] = -1.0

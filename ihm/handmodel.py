@@ -33,7 +33,7 @@ more than actuators. :func:`hand_model` maps each element to what the model has:
 * **Constant joint torques** at the state, each a backdrivable column with its torque
   as command: passive springs (``qfrc_spring``, per joint: ``spring:<joint>``; the
   stiffness itself is not modelled: valid while ``k`` times the motion stays small
-  against the torque), the links' own weight (``qfrc_bias - qfrc_gravcomp`` at rest,
+  against the torque), the links' own weight (``qfrc_gravcomp - qfrc_bias`` at rest,
   ``gravity``) and forces applied to the hand (``qfrc_applied``, ``applied``).
 * **Unrepresented**: dry joint friction (``frictionloss``), contacts of the hand with
   anything but the object, fluid forces, motion (damping, inertia). They are named in
@@ -65,7 +65,10 @@ _FRICTION = (int(_C.mjCNSTR_FRICTION_DOF), int(_C.mjCNSTR_FRICTION_TENDON))
 _EQ = mujoco.mjtEq
 _EQ_KIND = {int(_EQ.mjEQ_CONNECT): "connect", int(_EQ.mjEQ_WELD): "weld",
             int(_EQ.mjEQ_JOINT): "joint", int(_EQ.mjEQ_TENDON): "tendon"}  # fmt: skip
-RANK_RTOL = 1e-9  # singular values below this times the largest are zero (equality rank)
+#: singular values below this times the largest are zero (rank of the equalities, rows
+#: scaled to unit norm): a four-bar whose axes are parallel to 1e-6 rad (URDF round-off of
+#: pi/2 is 3.7e-6) still folds to its one free motion instead of locking rigid
+RANK_RTOL = 1e-6
 FORCE_ATOL = 1e-9  # a constraint or passive force below this [N, N m] is no force
 NEAR_LIMIT = 0.05  # a joint this close to a limit [rad or m] without a stop gets a warning
 
@@ -157,7 +160,8 @@ def hand_joints(model: mujoco.MjModel, in_obj: NDArray[np.bool_]) -> list[int]:
         names = [_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in bad]
         raise HandModelError(
             f"hand joints must be hinges or slides; got {names} (a ball or free joint in the "
-            "hand: replace it by hinges, or weld the base to the world)"
+            "hand: replace it by hinges, or weld the base to the world; a second free body "
+            "in the scene: only the object's subtree may have one)"
         )
     return joints
 
@@ -173,6 +177,8 @@ def _fold(
     n = len(joints)
     if A.shape[0] == 0:
         return np.eye(n), []
+    norms = np.linalg.norm(A, axis=1)
+    A = A[norms > 0] / norms[norms > 0, None]  # same null space, rows of one scale
     s = np.linalg.svd(A, compute_uv=False)
     tol = RANK_RTOL * max(1.0, float(s[0]))
     rank = int(np.sum(s > tol))
@@ -187,7 +193,7 @@ def _fold(
         raise HandModelError("equality constraints of the hand could not be folded (rank)")
     ind = [k for k in range(n) if k not in dep]
     sol, *_ = np.linalg.lstsq(A[:, dep], -A[:, ind], rcond=None)
-    if ind and np.abs(A[:, dep] @ sol + A[:, ind]).max() > 1e-8 * max(1.0, np.abs(A).max()):
+    if ind and np.abs(A[:, dep] @ sol + A[:, ind]).max() > 10 * RANK_RTOL:
         raise HandModelError("the hand's equality constraints are inconsistent at this state")
     T = np.zeros((n, len(ind)))
     T[ind, np.arange(len(ind))] = 1.0
@@ -269,6 +275,9 @@ def hand_model(
     prefer = eq_joint1 + [k for k in rest if k not in eq_joint1]
     T, dep = _fold(model, A, joints, prefer)
     ind = [k for k in range(len(joints)) if k not in dep]
+    if joints and not ind:
+        warns.append(f"the hand's equality constraints lock all {len(joints)} joints: the hand is "
+                     "a rigid fixture in the model")  # fmt: skip
 
     # -- actuators -----------------------------------------------------------------------
     cols: list[NDArray[np.float64]] = []

@@ -270,3 +270,40 @@ def test_settle_by_ctrl_closes_like_a_gripper_command(settled):
     model, data = load_scene(SCENE, settle_grasp=False, gravity=False)
     with pytest.raises(SceneError, match="fingers did not close"):
         ihm.scenes.settle(model, data, [0.0], command="ctrl")
+
+
+def test_stop_gap_and_near_limit_warning():
+    """A limit 0.5 mm beyond the settled slide finger, on the side its motor does not
+    hold (a stop there would push the finger open): warned about by name; with
+    ``stop_gap`` it becomes a stop column commanded 0 that carries no force yet."""
+    xml = TOY.replace('<joint name="lslide" type="slide" axis="1 0 0" damping="1"/>',
+                      '<joint name="lslide" type="slide" axis="1 0 0" damping="1" '
+                      'range="-0.05 LIM"/>')  # fmt: skip
+    model = mujoco.MjModel.from_xml_string(xml.replace("LIM", "0.05"))
+    data = mujoco.MjData(model)
+    ihm.scenes.settle(model, data, [5.0, 5.0])
+    q = float(data.qpos[model.joint("lslide").qposadr[0]])
+    model = mujoco.MjModel.from_xml_string(xml.replace("LIM", f"{q + 0.0005:.6f}"))
+    data = mujoco.MjData(model)
+    ihm.scenes.settle(model, data, [5.0, 5.0])
+    with pytest.warns(HandModelWarning, match="lslide .* from its limit"):
+        g = grasp_from_mujoco(model, data)
+    assert "limit:lslide" not in g.actuator_names
+    g = grasp_from_mujoco(model, data, stop_gap=0.002)
+    k = g.actuator_names.index("limit:lslide")
+    assert g.commands[k] == 0.0 and g.actuator_forces[k] == 0.0 and not g.backdrivable[k]
+    assert np.allclose(g.R[:, k], [-1.0, 0.0])  # pushes lslide back, away from its limit
+
+
+def test_reduced_forces_stay_in_the_cone(settled):
+    """The line and 3-point reductions of the pads give pushing forces inside the cone
+    (MuJoCo's state is a state of the reduced grasp): no warning, c_n >= 0, |c_t| <= mu c_n."""
+    model, data, _ = settled
+    import warnings
+
+    for opts in ({"reduce": "line"}, {"reduce": "extremes", "patch_points": 3}):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", HandModelWarning)
+            g = grasp_from_mujoco(model, data, **opts)
+        assert np.all(g.forces[:, 0] >= 0)
+        assert np.all(np.linalg.norm(g.forces[:, 1:], axis=1) <= g.mu * g.forces[:, 0] + 1e-9)
