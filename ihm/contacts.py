@@ -164,6 +164,22 @@ class SceneGrasp(Grasp):
                                                                (int(act.sum()),))  # fmt: skip
         return lo, hi
 
+    def full_commands(self, actuator_commands: ArrayLike) -> NDArray[np.float64]:
+        """Commands for every column of ``R`` from one command per MuJoCo actuator (the
+        scene's ``ihm_preload`` order): the actuators' columns get them, every other
+        column (stops, springs, weight) keeps its own command. Commands already one per
+        column pass through."""
+        f = np.asarray(actuator_commands, dtype=float).reshape(-1)
+        act = self.hand.actuated
+        if f.shape == self.commands.shape:
+            return f
+        if f.size != int(act.sum()):
+            raise GraspError(f"commands: {f.size} values for {int(act.sum())} actuators "
+                             f"({self.commands.size} columns of R)")  # fmt: skip
+        out = self.commands.copy()
+        out[act] = f
+        return out
+
     def command_weights(self) -> NDArray[np.float64]:
         """Weights for ``OptimalCommands(objective="weighted", weights=...)``: 1 per
         actuator, 0 for every pinned column (stops, springs, weight), so that only the

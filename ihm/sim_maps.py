@@ -183,6 +183,8 @@ def _init_analysis(grasp: Any, commands: np.ndarray, com: np.ndarray, method: st
     from stability import Grasp
 
     rigid = Grasp(points=grasp.points, normals=grasp.normals, mu=grasp.mu)
+    if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
+        commands = grasp.full_commands(commands)
     _STATE.update(grasp=grasp, rigid=rigid, commands=commands, com=com, method=method,
                   options=options)  # fmt: skip
 

@@ -171,6 +171,7 @@ def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: 
     f, tq = direction_obj[:3], direction_obj[3:]
     d = np.r_[f, np.cross(com, f) + tq]
     t = time.perf_counter()
+    commands = g.full_commands(commands)  # stops, springs: their own columns' commands
     sol = solve(g, MaxDisturbance(d, commands=commands, cap=cap, base=g.gravity_wrench),
                 method=method, **opts)  # fmt: skip
     wall = time.perf_counter() - t

@@ -116,7 +116,7 @@ def _predict(
     ``(0, 0, 0, sign, 0, 0)``) on top of the weight, by ``method``."""
     t0 = time.perf_counter()
     direction = np.array([0.0, 0.0, 0.0, sign, 0.0, 0.0])
-    q = MaxDisturbance(direction, commands=commands, cap=TORQUE_CAP_NM,
+    q = MaxDisturbance(direction, commands=grasp.full_commands(commands), cap=TORQUE_CAP_NM,
                        base=grasp.gravity_wrench)  # fmt: skip
     try:
         sol = solve(grasp, q, method=method, **opts)
@@ -169,7 +169,8 @@ def _model_preload_forces(grasp: SceneGrasp, commands: tuple[float, float], opts
     """The thesis model's preload contact forces (an equilibrium of the refinement method
     under the weight alone), (m, 3) [N]; None if it finds none."""
     try:
-        sol = solve(grasp, Existence(grasp.gravity_wrench, commands=commands),
+        sol = solve(grasp, Existence(grasp.gravity_wrench,
+                                     commands=grasp.full_commands(commands)),
                     method="refinement", **opts)  # fmt: skip
     except Exception:
         return None

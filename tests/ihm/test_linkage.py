@@ -19,7 +19,7 @@ from ihm.contacts import HandModelError, HandModelWarning, grasp_from_mujoco
 from ihm.hands import linkage_gripper as lg
 from ihm.resistance import simulated_resistance
 from ihm.scenes import SceneError, load_scene
-from stability import Existence, MaxDisturbance, solve
+from stability import Existence, GraspError, MaxDisturbance, solve
 
 SCENE = "linkage_box"
 
@@ -103,6 +103,12 @@ def test_elements_read_back_from_mujoco(settled):
         k = col[f"spring:{side}_spring_link"]
         assert g.backdrivable[k]
         assert np.allclose(g.R[:, k] * g.commands[k], g.T.T @ e, atol=1e-12)
+    # one command per MuJoCo actuator fills the actuators' columns, the rest keep theirs
+    assert np.array_equal(g.full_commands([lg.FORCE_LIMIT]), g.commands)
+    assert g.full_commands([1.5])[a] == 1.5 and g.command_weights()[a] == 1.0
+    assert g.command_weights().sum() == 1.0
+    with pytest.raises(GraspError, match="2 values for 1 actuators"):
+        g.full_commands([1.0, 2.0])
 
 
 def test_merged_seam_contacts_sum_mujocos_forces(settled):
