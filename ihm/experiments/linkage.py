@@ -135,8 +135,9 @@ def linkage_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, A
         _, _, g = _settled(cs)
         weight = solve(g, Existence(g.gravity_wrench, commands=g.commands),
                        method="refinement", time_limit=TIME_LIMIT_S)  # fmt: skip
+        stable = np.nan if weight.stable is None else float(weight.stable)  # 1 held, 0 not
         rows.append({"kind": "weight", "variant": cs, "contacts": g.m,
-                     "status": weight.status, "value": float(bool(weight.stable))})  # fmt: skip
+                     "status": weight.status, "value": stable})  # fmt: skip
         ratios, times, answered = [], [], 0
         for dname in DIRECTIONS:
             p = predict(cs, dname)
