@@ -270,6 +270,7 @@ def grasp_from_mujoco(
     backdrivable: bool | Iterable[str] | None = None,
     servo: str = "nonbackdrivable",
     stop_gap: float = 0.0,
+    spring_held: str = "raise",
     hand_rtol: float = 0.02,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
@@ -282,9 +283,9 @@ def grasp_from_mujoco(
     (``contact.friction[0]``; 0 for a frictionless ``condim=1`` contact; ``condim``
     4 or 6, with torsional or rolling friction, is refused). The hand's equalities,
     limits, springs and saturated actuators are modelled as :mod:`ihm.handmodel`
-    says (``backdrivable``, ``servo``, ``stop_gap`` are passed to it); ``grasp.elements`` lists
-    each, ``grasp.commands`` holds ``f_c`` per column of ``R`` (actuators: their force
-    at the state; stops: 0; constant torques: the torque).
+    says (``backdrivable``, ``servo``, ``stop_gap``, ``spring_held`` are passed to it);
+    ``grasp.elements`` lists each, ``grasp.commands`` holds ``f_c`` per column of ``R``
+    (actuators: their force at the state; stops: 0; constant torques: the torque).
 
     The hand equilibrium ``J^T c = R f`` with MuJoCo's contact forces and the actual
     column forces ``f`` (a stop's limit force, an actuator's force plus a ratchet's
@@ -300,7 +301,8 @@ def grasp_from_mujoco(
         contact with torsional/rolling friction (condim > 3); a bad option.
     HandModelError
         A hand joint that is not a hinge or slide; an equality tying the hand to the
-        object; a hand-equilibrium residual above ``hand_rtol``.
+        object; a passive motion held by springs alone (``spring_held="raise"``); a
+        hand-equilibrium residual above ``hand_rtol``.
     """
     if not (isinstance(merge_tol, (int, float)) and np.isfinite(merge_tol) and merge_tol >= 0):
         raise GraspError(f"merge_tol must be a finite number >= 0 [m], got {merge_tol!r}")
@@ -367,7 +369,8 @@ def grasp_from_mujoco(
     if reduce is not None:
         groups = _reduce_patches(groups, 0 if reduce == "line" else patch_points)
 
-    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo, stop_gap=stop_gap,
+    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
+                    stop_gap=stop_gap, spring_held=spring_held,
                     object_contacts=[i for g in groups for i in g["ids"]])  # fmt: skip
     hand_dofs, T = hm.dofs, hm.T
     m = len(groups)

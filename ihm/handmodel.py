@@ -35,6 +35,10 @@ more than actuators. :func:`hand_model` maps each element to what the model has:
   stiffness itself is not modelled: valid while ``k`` times the motion stays small
   against the torque), the links' own weight (``qfrc_gravcomp - qfrc_bias`` at rest,
   ``gravity``) and forces applied to the hand (``qfrc_applied``, ``applied``).
+* **Refused by default**: a passive motion held by springs alone (no actuator and no
+  loaded stop takes part in it; e.g. a Robotiq 2F-85 whose couplers settle just off their
+  stops): the model has no joint stiffness and would call every load on it unresisted
+  (``spring_held="warn"`` models it anyway, with a warning).
 * **Unrepresented**: dry joint friction (``frictionloss``), contacts of the hand with
   anything but the object, fluid forces, motion (damping, inertia). They are named in
   :attr:`HandModel.warnings` (and warned about by ``grasp_from_mujoco``), and their
@@ -211,6 +215,7 @@ def hand_model(
     servo: str = "nonbackdrivable",
     object_contacts: Iterable[int] = (),
     stop_gap: float = 0.0,
+    spring_held: str = "raise",
 ) -> HandModel:
     """The hand's coordinates, transmission, stops and constant torques (module doc).
 
@@ -221,7 +226,12 @@ def hand_model(
     indices between the object and the hand (the grasp's; other contacts on the hand
     are reported as unmodelled). ``stop_gap`` [rad or m]: a joint limit this close that
     carries no force yet is a stop too (engaged by a motion of at most ``stop_gap``).
+    ``spring_held``: a passive motion held by springs alone (no actuator, no loaded stop
+    takes part in it) raises :class:`HandModelError` (``"raise"``, default) or is modelled
+    with the springs as constant torques and a warning (``"warn"``).
     """
+    if spring_held not in ("raise", "warn"):
+        raise HandModelError(f"spring_held must be 'raise' or 'warn', got {spring_held!r}")
     if servo not in ("nonbackdrivable", "force"):
         raise HandModelError(f"servo must be 'nonbackdrivable' or 'force', got {servo!r}")
     joints = hand_joints(model, in_obj)
@@ -431,14 +441,24 @@ def hand_model(
     free = _null(np.stack(holding, axis=0)) if holding else np.eye(T.shape[1])
     spring_cols = [(c, n) for c, kd, n in zip(cols, kinds, _column_names(elements), strict=True)
                    if kd == "spring"]  # fmt: skip
-    for c, n in spring_cols:
-        if free.shape[1] and np.linalg.norm(free.T @ c) > 1e-6 * np.linalg.norm(c):
-            warns.append(
-                f"{n}: a passive motion of the hand is held by this spring alone (no actuator, "
-                "no loaded stop): the model keeps the spring's torque constant (its stiffness "
-                "is not modelled), so it calls a load on that motion unresisted where MuJoCo "
-                "moves the joint until the spring or a stop holds it"
-            )
+    held = [n for c, n in spring_cols
+            if free.shape[1] and np.linalg.norm(free.T @ c) > 1e-6 * np.linalg.norm(c)]  # fmt: skip
+    if held and spring_held == "raise":
+        raise HandModelError(
+            f"a passive motion of the hand is held by the spring(s) {held} alone (no actuator, "
+            "no loaded stop takes part in it): the grasp model has no joint stiffness, so it "
+            "would call any load on that motion unresisted, where MuJoCo moves the joint until "
+            "the spring or a stop holds it. Not supported. Settle the grasp so that the "
+            "linkage rests on its stops, or pass spring_held='warn' to model the spring as a "
+            "constant torque and read such answers as 'unresisted by the model'"
+        )
+    for n in held:
+        warns.append(
+            f"{n}: a passive motion of the hand is held by this spring alone (no actuator, "
+            "no loaded stop): the model keeps the spring's torque constant (its stiffness "
+            "is not modelled), so it calls a load on that motion unresisted where MuJoCo "
+            "moves the joint until the spring or a stop holds it"
+        )
     for what in near:
         warns.append(f"joint {what}: a stop that a small motion engages is not in the model "
                      "(the grasp model is first order); pass stop_gap to include it")  # fmt: skip

@@ -71,7 +71,7 @@ def test_without_folding_the_equalities_it_fails(settled, monkeypatch):
 
     monkeypatch.setattr(ihm.handmodel, "_fold", no_fold)
     with pytest.raises(HandModelError, match="hand equilibrium J\\^T c = R f does not hold"):
-        grasp_from_mujoco(model, data)
+        grasp_from_mujoco(model, data, spring_held="warn")
 
 
 def test_elements_read_back_from_mujoco(settled):
@@ -313,3 +313,22 @@ def test_reduced_forces_stay_in_the_cone(settled):
             g = grasp_from_mujoco(model, data, **opts)
         assert np.all(g.forces[:, 0] >= 0)
         assert np.all(np.linalg.norm(g.forces[:, 1:], axis=1) <= g.mu * g.forces[:, 0] + 1e-9)
+
+
+def test_spring_held_motion_is_refused_by_name():
+    """The right finger has no actuator, only a spring pushing it closed: its motion is
+    held by the spring alone, which the model (no joint stiffness) cannot represent: a
+    HandModelError naming the spring, or with spring_held="warn" a warning and a grasp."""
+    xml = TOY.replace('<joint name="rslide" type="slide" axis="-1 0 0" damping="1"/>',
+                      '<joint name="rslide" type="slide" axis="-1 0 0" damping="1" '
+                      'stiffness="100" springref="0.05"/>')  # fmt: skip
+    xml = xml.replace('<motor name="rm" joint="rslide"/>', "")
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    ihm.scenes.settle(model, data, [3.0])
+    with pytest.raises(HandModelError, match="held by the spring.*spring:rslide.*Not supported"):
+        grasp_from_mujoco(model, data)
+    with pytest.warns(HandModelWarning, match="spring:rslide: a passive motion"):
+        g = grasp_from_mujoco(model, data, spring_held="warn")
+    k = g.actuator_names.index("spring:rslide")
+    assert g.backdrivable[k] and g.hand_residual < 1e-3
