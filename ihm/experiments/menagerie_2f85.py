@@ -13,8 +13,9 @@ fingers hang down). Solver settings stay Menagerie's (pyramidal cone, impratio 1
 noslip). Then the recipe of ``docs/linkage.md``: ``settle`` with the actuator's
 ``forcerange`` bound (5: saturated), ``grasp_from_mujoco(reduce="line")`` (refused: the
 couplers rest off their stops, held by the spring links), then with
-``spring_held="warn"``, with and without ``stop_gap``, ``refinement`` along the six axis forces on top of the weight, and
-:func:`ihm.resistance.simulated_resistance` on fresh settles. Writes
+``spring_held="warn"``, with and without ``stop_gap``, ``refinement`` along the six axis
+forces on top of the weight, and :func:`ihm.resistance.simulated_resistance` on fresh
+settles. Writes
 ``OUT/menagerie_2f85.csv`` and prints the table and the warnings.
 """
 
