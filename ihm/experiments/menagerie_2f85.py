@@ -115,7 +115,9 @@ def run(path: str | Path, time_limit: float = 30.0) -> list[dict[str, Any]]:
             sol = solve(g, MaxDisturbance(d, commands=g.commands, cap=100.0,
                                           base=g.gravity_wrench),
                         method="refinement", time_limit=time_limit)  # fmt: skip
-            value = np.nan if sol.value is None else (sol.value if sol.stable else 0.0)
+            value = np.nan  # no answer (time-out, not converged)
+            if sol.status == "solved":
+                value = float(sol.value) if sol.stable else 0.0  # 0: unstable
             rows.append({"kind": "predicted", "variant": variant, "direction": name,
                          "value": value, "status": sol.status,
                          "seconds": time.perf_counter() - t0,
