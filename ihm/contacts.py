@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
-from .handmodel import HandModel, HandModelError, hand_joints, hand_model
+from .handmodel import HandElement, HandModel, HandModelError, hand_joints, hand_model
 
 __all__ = [
     "HandModelError",
@@ -113,7 +113,7 @@ class SceneGrasp(Grasp):
     forces: NDArray[np.float64]
     commands: NDArray[np.float64]
     actuator_forces: NDArray[np.float64]
-    elements: list
+    elements: list[HandElement]
     hand: HandModel
     hand_residual: float
     gravity_wrench: NDArray[np.float64]
