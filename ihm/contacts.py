@@ -69,7 +69,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
-from .handmodel import HandElement, HandModel, HandModelError, hand_joints, hand_model
+from .handmodel import (
+    HandElement,
+    HandModel,
+    HandModelError,
+    hand_joints,
+    hand_model,
+    transmission,
+)
 
 __all__ = [
     "HandModelError",
@@ -222,21 +229,6 @@ def hand_coordinates(
     in_obj = body_subtree(model, _body_id(model, object_body))
     hm = hand_model(model, data, in_obj)
     return hm.dofs, hm.T, hm.joint_names
-
-
-def transmission(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float64]:
-    """Dense actuator moment matrix, (nu, nv): ``qfrc_actuator = moment^T force``.
-
-    For a joint actuator the row is ``gear`` at its dof; for a fixed-tendon
-    actuator ``gear`` times the tendon coefficients [m]. ``data.actuator_moment``
-    is stored sparse in MuJoCo >= 3; this expands it.
-    """
-    dense = np.zeros((model.nu, model.nv))
-    if model.nu:
-        mujoco.mju_sparse2dense(
-            dense, data.actuator_moment, data.moment_rownnz, data.moment_rowadr, data.moment_colind
-        )
-    return dense
 
 
 def contact_frame_force(

@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from stability import GraspError
 
-__all__ = ["HandElement", "HandModel", "HandModelError", "hand_model"]
+__all__ = ["HandElement", "HandModel", "HandModelError", "hand_model", "transmission"]
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 _C = mujoco.mjtConstraint
@@ -109,9 +109,8 @@ class HandModel:
     R : (l, a) columns for actuators, stops and constant torques, in that order
     commands : (a,) ``f_c`` per column; ``forces``: (a,) actual forces at the state
     backdrivable : (a,) constant force sources
-    names : (a,) column names; ``elements``: every column and folded equality
+    elements : every column and folded equality (:attr:`names`: the columns')
     warnings : elements the model leaves out (their torques stay in the residual)
-    unmodelled : (l,) those elements' torque on the independent joints [N m]
     """
 
     dofs: NDArray[np.int64]
@@ -122,18 +121,24 @@ class HandModel:
     commands: NDArray[np.float64]
     forces: NDArray[np.float64]
     backdrivable: NDArray[np.bool_]
-    names: list[str]
     elements: list[HandElement] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    unmodelled: NDArray[np.float64] | None = None
+
+    @property
+    def names(self) -> list[str]:
+        """(a,) the names of the columns of ``R``."""
+        return [e.name for e in _columns(self.elements)]
 
     @property
     def actuated(self) -> NDArray[np.bool_]:
         """(a,) True for the columns that are MuJoCo actuators (the commands one sets)."""
-        return np.array([e.kind == "actuator" for e in self._columns()], dtype=bool)
+        return np.array([e.kind == "actuator" for e in _columns(self.elements)], dtype=bool)
 
-    def _columns(self) -> list[HandElement]:
-        return [e for e in self.elements if e.kind != "equality" and e.model != "merged"]
+
+def _columns(elements: list[HandElement]) -> list[HandElement]:
+    """The elements that are columns of ``R``, in order (not folded equalities, not stops
+    merged into an actuator)."""
+    return [e for e in elements if e.kind != "equality" and e.model != "merged"]
 
 
 def _name(model: mujoco.MjModel, obj: mujoco.mjtObj, i: int) -> str:
@@ -149,6 +154,21 @@ def efc_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float
     if n:
         mujoco.mju_sparse2dense(dense, data.efc_J, data.efc_J_rownnz, data.efc_J_rowadr,
                                 data.efc_J_colind)  # fmt: skip
+    return dense
+
+
+def transmission(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float64]:
+    """Dense actuator moment matrix, (nu, nv): ``qfrc_actuator = moment^T force``.
+
+    For a joint actuator the row is ``gear`` at its dof; for a fixed-tendon
+    actuator ``gear`` times the tendon coefficients [m]. ``data.actuator_moment``
+    is stored sparse in MuJoCo >= 3; this expands it.
+    """
+    dense = np.zeros((model.nu, model.nv))
+    if model.nu:
+        mujoco.mju_sparse2dense(
+            dense, data.actuator_moment, data.moment_rownnz, data.moment_rowadr, data.moment_colind
+        )
     return dense
 
 
@@ -269,11 +289,7 @@ def hand_model(
         folded.extend(rows.tolist())
         elements.append(HandElement(ename, "equality", "folded", note=f"{rows.size} rows"))
     A = E[np.array(folded, dtype=np.int64)][:, dofs] if folded else np.zeros((0, len(joints)))
-    moment = np.zeros((model.nu, model.nv))
-    if model.nu:
-        mujoco.mju_sparse2dense(moment, data.actuator_moment, data.moment_rownnz,
-                                data.moment_rowadr, data.moment_colind)  # fmt: skip
-    Mh = moment[:, dofs]
+    Mh = transmission(model, data)[:, dofs]
     actuated = np.abs(Mh).max(axis=0, initial=0.0) > 0
     eq_joint1 = []
     for e in range(model.neq):
@@ -412,8 +428,7 @@ def hand_model(
                                   data.xipos[b], int(b), xf)  # fmt: skip
         constant("xfrc_applied", "applied", xf[dofs], "xfrc_applied on hand bodies")
 
-    # -- what stays out ---------------------------------------------------------------------
-    unmodelled = np.zeros(T.shape[1])
+    # -- what stays out (in the residual) ---------------------------------------------------
     own = {int(i) for i in object_contacts}
     for r in np.flatnonzero(np.isin(typ, _CONTACT) & touches_hand):
         if int(eid[r]) in own or abs(frc[r]) <= FORCE_ATOL:
@@ -424,7 +439,6 @@ def hand_model(
                f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, int(b2))} (not hand-object)")  # fmt: skip
         if msg not in warns:
             warns.append(msg)
-        unmodelled += T.T @ (E[r, dofs] * frc[r])
     for r in np.flatnonzero(np.isin(typ, _FRICTION) & touches_hand):
         if abs(frc[r]) <= FORCE_ATOL:
             continue
@@ -433,14 +447,13 @@ def hand_model(
         who = (jname[list(dofs).index(int(eid[r]))] if is_dof and int(eid[r]) in dofs
                else _name(model, obj, int(eid[r])))  # fmt: skip
         warns.append(f"dry friction (frictionloss) of {who}: {frc[r]:.3g}")
-        unmodelled += T.T @ (E[r, dofs] * frc[r])
     # a motion that no actuator and no loaded stop takes part in, held by springs alone
-    kinds = [e.kind for e in elements if e.kind != "equality" and e.model != "merged"]
-    holding = [c for c, kd, fa in zip(cols, kinds, f_act, strict=True)
-               if kd == "actuator" or (kd == "stop" and fa > FORCE_ATOL)]  # fmt: skip
+    columns = _columns(elements)
+    holding = [c for c, e, fa in zip(cols, columns, f_act, strict=True)
+               if e.kind == "actuator" or (e.kind == "stop" and fa > FORCE_ATOL)]  # fmt: skip
     free = _null(np.stack(holding, axis=0)) if holding else np.eye(T.shape[1])
-    spring_cols = [(c, n) for c, kd, n in zip(cols, kinds, _column_names(elements), strict=True)
-                   if kd == "spring"]  # fmt: skip
+    spring_cols = [(c, e.name) for c, e in zip(cols, columns, strict=True)
+                   if e.kind == "spring"]  # fmt: skip
     held = [n for c, n in spring_cols
             if free.shape[1] and np.linalg.norm(free.T @ c) > 1e-6 * np.linalg.norm(c)]  # fmt: skip
     if held and spring_held == "raise":
@@ -468,7 +481,6 @@ def hand_model(
         tau = T.T @ np.asarray(vec)[dofs]
         if np.abs(tau).max(initial=0.0) > 1e-3 * max(big, FORCE_ATOL):
             warns.append(f"{what} forces {np.abs(tau).max():.3g} N m on the hand joints")
-        unmodelled += tau
     return HandModel(
         dofs=dofs,
         T=T,
@@ -478,10 +490,8 @@ def hand_model(
         commands=np.array(f_c),
         forces=np.array(f_act),
         backdrivable=np.array(back, dtype=bool),
-        names=[e.name for e in elements if e.kind != "equality" and e.model != "merged"],
         elements=elements,
         warnings=warns,
-        unmodelled=unmodelled,
     )
 
 
@@ -498,10 +508,6 @@ def _null(A: NDArray[np.float64]) -> NDArray[np.float64]:
     _, sv, vt = np.linalg.svd(A)
     rank = int(np.sum(sv > RANK_RTOL * max(1.0, float(sv.max(initial=0.0)))))
     return vt[rank:].T
-
-
-def _column_names(elements: list[HandElement]) -> list[str]:
-    return [e.name for e in elements if e.kind != "equality" and e.model != "merged"]
 
 
 def _index(elements: list[HandElement], name: str) -> int:

@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import GraspError
 
+from .contacts import body_subtree
 from .ratchet import Ratchet, actuated_joints, actuated_tendons
 
 __all__ = [
@@ -131,19 +132,6 @@ def _as_forces(value: ArrayLike, nu: int) -> NDArray[np.float64]:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise SceneError(f"actuator forces must be {nu} numbers, got {value!r}") from exc
-
-
-def _position_gain(model: mujoco.MjModel) -> NDArray[np.float64]:
-    """``kp`` of position-servo actuators (force = kp (ctrl - length)), 0 for others.
-
-    A position actuator has ``gainprm[0] = kp`` and ``biasprm[:2] = (0, -kp)``.
-    """
-    kp = np.zeros(model.nu)
-    for a in range(model.nu):
-        g, b = model.actuator_gainprm[a], model.actuator_biasprm[a]
-        if model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE and np.isclose(b[1], -g[0]):
-            kp[a] = g[0]
-    return kp
 
 
 def _affine(model: mujoco.MjModel) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -409,19 +397,14 @@ def _check_held(model: mujoco.MjModel, data: mujoco.MjData, object_body: str) ->
     obj = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_body)
     if obj < 0:
         return
-    inside = np.zeros(model.nbody, dtype=bool)
-    inside[obj] = True
-    for b in range(obj + 1, model.nbody):
-        inside[b] = inside[model.body_parentid[b]]
+    inside = body_subtree(model, obj)
     moving, static = set(), set()
     for c in data.contact[: data.ncon]:
         b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
         if inside[b1] == inside[b2]:
             continue
         other = int(b2 if inside[b1] else b1)
-        (moving if model.body_dofnum[other] or _has_moving_parent(model, other) else static).add(
-            model.body(other).name or str(other)
-        )
+        (moving if _moves(model, other) else static).add(model.body(other).name or str(other))
     if moving:
         return
     if static:
@@ -433,7 +416,8 @@ def _check_held(model: mujoco.MjModel, data: mujoco.MjData, object_body: str) ->
     )
 
 
-def _has_moving_parent(model: mujoco.MjModel, b: int) -> bool:
+def _moves(model: mujoco.MjModel, b: int) -> bool:
+    """Body ``b`` or one of its ancestors has a degree of freedom."""
     while b > 0:
         if model.body_dofnum[b]:
             return True

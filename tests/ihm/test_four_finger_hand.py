@@ -53,7 +53,8 @@ def test_servos_and_ranges(hand):
     # position servos: force = KP (ctrl - q), ctrl limited to the joint range
     assert np.allclose(model.actuator_gainprm[:, 0], ff.KP)
     assert np.allclose(model.actuator_biasprm[:, :3], [0.0, -ff.KP, 0.0])
-    assert np.allclose(ihm.scenes._position_gain(model), ff.KP)
+    gain, bias = ihm.scenes._affine(model)  # settle's reading: force = g ctrl + b0 + b1 L
+    assert np.allclose(gain[:, 0], ff.KP) and np.allclose(-bias[:, 1], ff.KP)
     assert np.allclose(model.actuator_ctrlrange, ff.JOINT_RANGES)
     assert np.allclose(model.actuator_forcerange, [-ff.FORCE_LIMIT, ff.FORCE_LIMIT])
     assert np.allclose(model.dof_damping, ff.DAMPING)
