@@ -352,8 +352,7 @@ def hand_model(
         merged = False
         for a in range(model.nu):
             ca = cols[a]
-            na, nc = np.linalg.norm(ca), np.linalg.norm(col)
-            if back[a] or na == 0 or nc == 0 or ca @ col < (1 - 1e-9) * na * nc:
+            if back[a] or not _along(ca, col):
                 continue
             add = float(frc[r]) * float(col @ ca) / float(ca @ ca)
             f_act[a] += add
@@ -498,9 +497,13 @@ def hand_model(
 def _blocked(col: NDArray[np.float64], cols: list[NDArray[np.float64]], back: list[bool]) -> bool:
     """A nonbackdrivable column (actuator or stop) acts along ``col``, the same way: the
     motion a stop along ``col`` would block is blocked already."""
-    n = np.linalg.norm(col)
-    return any(not b and c @ col >= (1 - 1e-9) * n * np.linalg.norm(c)
-               for c, b in zip(cols, back, strict=True))  # fmt: skip
+    return any(not b and _along(c, col) for c, b in zip(cols, back, strict=True))
+
+
+def _along(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
+    """``a`` and ``b`` are non-zero and point the same way (to 1e-9 in the cosine)."""
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return bool(na > 0 and nb > 0 and a @ b >= (1 - 1e-9) * na * nb)
 
 
 def _null(A: NDArray[np.float64]) -> NDArray[np.float64]:
