@@ -65,6 +65,7 @@ def run_episodes(
     episode: Callable[[gym.Env, Any, dict[str, Any]], Episode],
     *,
     reset_seed: Callable[[int, int], int | None] | None = None,
+    reset_options: Callable[[int, int], dict[str, Any] | None] | None = None,
     max_steps: int | None = None,
 ) -> list[dict[str, Any]]:
     """``n_episodes`` episodes over ``envs``; the :meth:`Episode.result` of each, in the order
@@ -72,7 +73,8 @@ def run_episodes(
 
     Env ``i`` of ``k`` runs ``(n_episodes + i) // k`` episodes, resetting as soon as one ends
     (``env.reset()``, or ``env.reset(seed=reset_seed(i, j))`` for its ``j``-th episode when
-    ``reset_seed`` gives a seed). Each round, ``act`` gets the observations of the envs still
+    ``reset_seed`` gives a seed; ``reset(options=reset_options(i, j))`` when that is given).
+    Each round, ``act`` gets the observations of the envs still
     running, stacked in env order. An episode ends when the env terminates or truncates, when
     its :class:`Episode` says so, or after ``max_steps`` steps.
     """
@@ -88,7 +90,8 @@ def run_episodes(
 
     def start(i: int) -> None:
         seed = reset_seed(i, counts[i]) if reset_seed is not None else None
-        obs[i], info = envs[i].reset() if seed is None else envs[i].reset(seed=seed)
+        options = reset_options(i, counts[i]) if reset_options is not None else None
+        obs[i], info = envs[i].reset(seed=seed, options=options)
         episodes[i] = episode(envs[i], obs[i], info)
         steps[i] = 0
 
@@ -265,14 +268,16 @@ def evaluate_success(
 
 
 class RotationEpisode:
-    """An episode of the four-finger rotation env: steps, turned angle about +z
-    (``info["rotation_angle"]``), rotation speed = angle / (steps * dt) [rad/s], dropped
+    """An episode of the four-finger rotation env: steps, net turn about +z
+    (``info["net_turn"]``: the unwrapped z twist of the object's orientation relative to its
+    start, :func:`envs.four_finger.z_twist`), the summed per-step rotation about +z (the
+    reward's, ``info["rotation_angle"]``), speeds = angle / (steps * dt) [rad/s], dropped
     (the env terminated) and shield interventions (``info["shield_intervened"]``)."""
 
     def __init__(self, env: gym.Env, obs: Any = None, info: dict[str, Any] | None = None) -> None:
         self.dt = float(env.unwrapped.dt)
         self.steps = self.interventions = 0
-        self.angle = 0.0
+        self.angle = self.net = 0.0
         self.dropped = False
 
     def step(
@@ -280,15 +285,19 @@ class RotationEpisode:
     ) -> bool:
         self.steps += 1
         self.angle = float(info["rotation_angle"])
+        self.net = float(info.get("net_turn", self.angle))
         self.dropped = bool(terminated)
         self.interventions += bool(info.get("shield_intervened", False))
         return False
 
     def result(self) -> dict[str, Any]:
-        """``steps``, ``speed_rad_s``, ``dropped``, ``interventions``."""
+        """``steps``, ``speed_rad_s`` (net turn), ``summed_rad_s`` (summed rotation),
+        ``dropped``, ``interventions``."""
+        t = self.steps * self.dt
         return {
             "steps": self.steps,
-            "speed_rad_s": self.angle / (self.steps * self.dt),
+            "speed_rad_s": self.net / t,
+            "summed_rad_s": self.angle / t,
             "dropped": self.dropped,
             "interventions": self.interventions,
         }
@@ -301,7 +310,8 @@ def evaluate_rotation(
     normalize: Callable[[np.ndarray], np.ndarray] | None = None,
     deterministic: bool = True,
 ) -> dict[str, float]:
-    """Mean rotation speed [rad/s] and drop rate of the policy over ``n_episodes`` episodes.
+    """Mean net-turn speed [rad/s] (``speed_rad_s``; ``summed_rad_s``: the summed per-step
+    rotation's) and drop rate of the policy over ``n_episodes`` episodes.
 
     The envs run side by side (:func:`run_episodes`), all queried in one batch; each
     episode ends at the env's time limit or at a drop (:class:`RotationEpisode`).
@@ -317,6 +327,7 @@ def evaluate_rotation(
         "episodes": len(eps),
         "speed_rad_s": float(np.mean(speeds)) if speeds else float("nan"),
         "speed_median_rad_s": float(np.median(speeds)) if speeds else float("nan"),
+        "summed_rad_s": _mean([e["summed_rad_s"] for e in eps]),
         "drop_rate": _mean([e["dropped"] for e in eps]),
         "intervention_rate": sum(e["interventions"] for e in eps) / n_steps
         if n_steps

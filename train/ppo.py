@@ -2,6 +2,8 @@
 
 - ``python -m train.ppo [options]``: the main job, the four-finger in-hand rotation policy
   of thesis ch. 7 (:mod:`train.rotation`; ``python -m train.ppo --help`` lists its options);
+- ``python -m train.ppo seeds --seeds N [options]``: the main job for N seeds, each evaluated
+  on held-out start grasps, with a CSV and chart of the spread (:mod:`train.seeds`);
 - ``python -m train.ppo islands [options]``: PPO on a shielded islands-and-bridges env
   (:mod:`train.islands_ppo`; ``python -m train.ppo islands --help``).
 
@@ -31,6 +33,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "islands":
         return islands_ppo.main(argv[1:])
+    if argv and argv[0] == "seeds":
+        from train import seeds
+
+        return {"seeds": seeds.main(argv[1:])}
     if "--resume" in argv:
         i = argv.index("--resume")
         cfg_file = Path(argv[i + 1]) / "config.json" if i + 1 < len(argv) else None

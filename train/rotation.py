@@ -45,7 +45,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
-from envs.four_finger import FRAME_SKIP, OBJECTS, TIMESTEP, grasp_cache
+from envs.four_finger import FRAME_SKIP, OBJECTS, TIMESTEP, Randomization, grasp_cache
 from shields import GraspShield
 from shields.qp import BACKENDS
 from stability.io import write_csv
@@ -90,11 +90,26 @@ POLICY_DT = TIMESTEP * FRAME_SKIP  # [s] 0.05: the thesis' 20 Hz policy
 TARGET_SPEED = 0.5  # [rad/s] the task's target (issue 11), over 20 s episodes; drops <= 5 %
 
 
+THESIS: dict[str, Any] = {
+    "episode_steps": 64,
+    "rotation_cap": float("inf"),
+    "drop_weight": 0.0,
+    "randomize": False,
+    "lr_schedule": "constant",
+}
+"""What ``--thesis`` changes back to the thesis' setup (ch. 7): 64-step episodes, the uncapped
+rotation reward without a drop penalty, nominal physics, a constant learning rate. Options
+given beside ``--thesis`` still apply."""
+
+
 @dataclass
 class RotateConfig:
     """Everything a rotation training run depends on; saved as config.json."""
 
     object: str = opt("sphere", "object in the hand", choices=OBJECTS)
+    thesis: bool = opt(
+        False, "the thesis' setup as the defaults (train.rotation.THESIS); other options apply"
+    )
     gravity: bool = opt(True, "gravity on (the thesis' hard case)")
     torsional: bool = opt(
         True, "torsional friction at the contacts (condim 4; off: point contacts, exploitable)"
@@ -136,6 +151,19 @@ class RotateConfig:
     ent_coef: float = opt(0.0, "entropy bonus coefficient")
     log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
     drop_weight: float = opt(0.0, "env drop penalty weight (0: the thesis' reward)")
+    rotation_cap: float = opt(
+        float("inf"), "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
+    )
+    randomize: bool = opt(
+        False,
+        "randomised physics in the training envs (envs.four_finger.Randomization: friction, "
+        "torsional friction, mass, servo gains, latency, sensor noise); evaluations stay nominal",
+    )
+    lr_schedule: str = opt(
+        "constant",
+        "learning rate: constant, or linear decay to 0 over --total-steps",
+        choices=("constant", "linear"),
+    )
     episode_steps: int = opt(64, "training episode length (thesis: 64)")
     checkpoint_every: int = opt(100_000, "env steps between checkpoints and evaluations")
     eval_episodes: int = opt(20, "episodes per evaluation (deterministic policy)")
@@ -155,6 +183,9 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         epilog="The islands-and-bridges toy: python -m train.ppo islands [options] "
         "(python -m train.ppo islands --help).",
     )
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--thesis" in argv:
+        parser.set_defaults(**THESIS)
     cfg = RotateConfig(**vars(parser.parse_args(argv)))
     ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
     problems = option_problems(cfg, ints)
@@ -188,6 +219,7 @@ def make_env(
     monitor_file: str | None = None,
     append: bool = False,
     max_steps: int | None = None,
+    train: bool = True,
 ) -> Callable[[], gym.Env]:
     """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
     ``cfg.episode_steps``) -> :class:`shields.GraspShield` with ``--shield qp`` -> Monitor
@@ -201,6 +233,8 @@ def make_env(
             torsional=cfg.torsional,
             **env_physics(cfg.timestep),
             drop_weight=cfg.drop_weight,
+            rotation_cap=cfg.rotation_cap,
+            randomize=Randomization() if cfg.randomize and train else None,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
         if cfg.shield == "qp":
@@ -221,7 +255,9 @@ def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
     """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), constant lr;
     :class:`train.pipeline.PipelinedPPO`, which pipelines its rollouts over a
     ``ChunkedVecEnv`` with parts and is plain SB3 PPO on any other env."""
-    return new_ppo(cfg, vec_env, cfg.learning_rate, algo=PipelinedPPO)
+    lr = cfg.learning_rate
+    schedule = (lambda rest: lr * rest) if cfg.lr_schedule == "linear" else lr
+    return new_ppo(cfg, vec_env, schedule, algo=PipelinedPPO)
 
 
 class RolloutThreads(BaseCallback):
@@ -416,7 +452,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         vec = VecNormalize(vec, gamma=cfg.gamma)
     max_eval = int(round(cfg.eval_seconds * 20))
     n_eval = max(1, min(cfg.eval_episodes, 10))
-    eval_envs = [make_env(cfg, s, max_steps=max_eval)() for s in seeds.envs("validation", n_eval)]
+    eval_envs = [
+        make_env(cfg, s, max_steps=max_eval, train=False)()
+        for s in seeds.envs("validation", n_eval)
+    ]
     if cfg.resume is not None:
         model = PipelinedPPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
     else:

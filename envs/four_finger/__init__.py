@@ -8,14 +8,22 @@ the gymnasium env ``ihm/FourFingerRotate-v0``.
   (:func:`generate_grasps`, :func:`grasp_cache`);
 - :mod:`~envs.four_finger.env`: the env :class:`FourFingerRotate` (its spaces, reward and
   episode end are documented there) and :func:`yaw_rate`;
+- :mod:`~envs.four_finger.randomize`: randomised physics (friction, torsional friction, mass,
+  servo gains, latency, sensor noise; :class:`Randomization`, :func:`corners`);
 - :mod:`~envs.four_finger.states`: saved env states and one policy step from them under given
   physics (:func:`save_state`, :func:`policy_step_outcomes`).
 
 Every public name of these modules is importable from ``envs.four_finger``.
 """
 
-from envs.four_finger.cache import VERIFY_STEPS, GraspCache, generate_grasps, grasp_cache
-from envs.four_finger.env import N_OBS, FourFingerRotate, yaw_rate
+from envs.four_finger.cache import (
+    GRASP_SETS,
+    VERIFY_STEPS,
+    GraspCache,
+    generate_grasps,
+    grasp_cache,
+)
+from envs.four_finger.env import N_OBS, FourFingerRotate, yaw_rate, z_twist
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     DROP_Z,
@@ -33,10 +41,12 @@ from envs.four_finger.physics import (
     mixed_contact,
     scene_name,
 )
+from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization, corners
 from envs.four_finger.states import STATE_SPEC, policy_step_outcomes, save_state
 
 __all__ = [
     "CONTACT_LINKS",
+    "GRASP_SETS",
     "DROP_Z",
     "FRAME_SKIP",
     "MAX_FORCE",
@@ -52,7 +62,11 @@ __all__ = [
     "FourFingerError",
     "FourFingerRotate",
     "GraspCache",
+    "ModelScaler",
+    "PhysicsSample",
+    "Randomization",
     "Physics",
+    "corners",
     "dynamic_pairs",
     "generate_grasps",
     "grasp_cache",
@@ -61,4 +75,5 @@ __all__ = [
     "save_state",
     "scene_name",
     "yaw_rate",
+    "z_twist",
 ]

@@ -32,9 +32,13 @@ from envs.four_finger.physics import (
 )
 from ihm.hands import four_finger as ff
 
-__all__ = ["VERIFY_STEPS", "GraspCache", "generate_grasps", "grasp_cache"]
+__all__ = ["GRASP_SETS", "VERIFY_STEPS", "GraspCache", "generate_grasps", "grasp_cache"]
 
 VERIFY_STEPS = 40  # policy steps a cached grasp must hold with zero actions
+GRASP_SETS = {"train": 0, "test": 1_000_003}
+"""Generator seeds of the start-grasp sets: ``train`` (every training run and the trainers'
+own validation) and ``test`` (held-out evaluation: a disjoint random stream, so no training
+grasp is ever an evaluation grasp)."""
 _GENERATOR_VERSION = 2  # bump when generate_grasps changes
 
 

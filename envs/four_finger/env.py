@@ -45,7 +45,8 @@ detection, as in every MuJoCo env.
 
 - ``rotation``: the object's mean angular velocity about the world +z axis over
   the policy step, ``[log(R_t R_{t-1}^T)]_z / dt`` [rad/s] (positive:
-  counter-clockwise seen from above; the thesis' reward);
+  counter-clockwise seen from above; the thesis' reward), clipped to
+  ``[-rotation_cap, rotation_cap]`` (default ``inf``: the thesis' uncapped reward);
 - ``drop``: ``-drop_weight`` on the step that ends the episode by a drop
   (default weight 0, the thesis' setup);
 - ``action``: ``-action_weight * |a|^2 / 12`` (default 0).
@@ -56,8 +57,11 @@ Terminated when the object is dropped or out of the hand: its centre below
 ``DROP_Z`` (0.05 m above the palm; held at about 0.077 m, lying on the palm at
 0.035 m) or more than ``OUT_RADIUS`` (0.045 m) from the palm axis horizontally.
 Truncated by the registration's time limit (``ihm/FourFingerRotate-v0``: 64
-steps, the thesis' episode length; ``info["rotation_angle"]`` accumulates the
-turned angle [rad]).
+steps, the thesis' episode length). ``info["rotation_angle"]`` accumulates the
+per-step rotations about +z (uncapped) [rad]; ``info["net_turn"]`` is the net turn: the
+twist about +z of the object's orientation relative to its start (:func:`z_twist`),
+unwrapped step by step [rad]. The two agree for a rotation about z; when the object
+tumbles the summed rotation overstates the net turn (tested).
 
 ## Starting State
 
@@ -65,12 +69,16 @@ A state drawn uniformly from a cache of varied stable grasps (the thesis found
 initial-state randomisation decisive): see :mod:`envs.four_finger.cache` for the generator
 and the cache. Each cached grasp is verified to hold for ``VERIFY_STEPS`` policy steps with
 zero actions. The cache is built on first use (about 10-30 s per object and gravity setting)
-and kept on disk under ``$IHM_CACHE`` (default ``~/.cache/ihm``).
+and kept on disk under ``$IHM_CACHE`` (default ``~/.cache/ihm``). ``grasps="test"`` starts
+from the held-out set instead (a generator seed no training run uses,
+:data:`envs.four_finger.GRASP_SETS`).
 
 ## Physics
 
 :mod:`envs.four_finger.physics`: 2 ms x 25 substeps, PGS to a tolerance of 1e-4, torsional
-friction, explicit contact pairs.
+friction, explicit contact pairs. ``randomize=Randomization()`` draws friction, torsional
+friction, object mass, servo gains, one step of action latency and sensor noise per episode;
+``physics=PhysicsSample(...)`` fixes them (:mod:`envs.four_finger.randomize`).
 """
 
 from __future__ import annotations
@@ -84,7 +92,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from envs.four_finger.cache import grasp_cache
+from envs.four_finger.cache import GRASP_SETS, grasp_cache
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     FRAME_SKIP,
@@ -94,9 +102,10 @@ from envs.four_finger.physics import (
     Physics,
     scene_name,
 )
+from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
 from ihm.hands import four_finger as ff
 
-__all__ = ["N_OBS", "FourFingerRotate", "yaw_rate"]
+__all__ = ["N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
 
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 
@@ -122,6 +131,23 @@ def yaw_rate(quat_before: NDArray[np.float64], quat_after: NDArray[np.float64], 
     return z / sin_half * angle / dt
 
 
+def z_twist(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float:
+    """Twist about world +z of the rotation taking ``quat_start`` to ``quat`` (MuJoCo ``wxyz``
+    quaternions) [rad], in ``(-pi, pi]``: the angle of the swing-twist decomposition
+    ``q_rel = q * conj(q_start) = swing * twist``, ``twist = (w, 0, 0, z) / |(w, 0, 0, z)|``,
+    ``angle = 2 atan2(z, w)`` of ``q_rel``. For a rotation about z it is that rotation's
+    angle; a tumble (rotation about a horizontal axis) adds nothing. Undefined (0 returned)
+    for a half turn about a horizontal axis, where ``w = z = 0``."""
+    w0, x0, y0, z0 = quat_start.tolist()
+    w1, x1, y1, z1 = quat.tolist()
+    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    if w * w + z * z < 1e-24:
+        return 0.0
+    a = 2.0 * math.atan2(z, w)
+    return a - 2.0 * math.pi if a > math.pi else (a + 2.0 * math.pi if a <= -math.pi else a)
+
+
 class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Rotate a held object about the vertical axis with the four-finger hand.
 
@@ -133,6 +159,10 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     frame_skip : physics substeps per policy step.
     timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
     drop_weight, action_weight : weights of the optional reward terms (module doc).
+    rotation_cap : bound of the rotation reward [rad/s] (``inf``: none).
+    randomize : a :class:`~envs.four_finger.randomize.Randomization` drawn at every reset, or
+        ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
+    grasps : start-grasp set, ``"train"`` or ``"test"`` (held out).
     n_grasps : size of the starting-state cache.
     render_mode : ``None`` or ``"rgb_array"``; ``width``, ``height`` [px];
         ``camera``: ``"side"`` or ``"top"``.
@@ -161,6 +191,10 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         timestep: float = TIMESTEP,
         drop_weight: float = 0.0,
         action_weight: float = 0.0,
+        rotation_cap: float = math.inf,
+        randomize: Randomization | None = None,
+        physics: PhysicsSample | None = None,
+        grasps: str = "train",
         n_grasps: int = 256,
         render_mode: str | None = None,
         width: int = 480,
@@ -180,12 +214,22 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         ):
             if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
+        if (
+            not isinstance(rotation_cap, (int, float))
+            or math.isnan(rotation_cap)
+            or rotation_cap <= 0
+        ):
+            raise FourFingerError(f"rotation_cap must be > 0 (inf: no cap), got {rotation_cap!r}")
         if max_setpoint_step <= 0 or timestep <= 0:
             raise FourFingerError("max_setpoint_step and timestep must be > 0")
         if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
             raise FourFingerError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
         if not isinstance(n_grasps, (int, np.integer)) or n_grasps < 1:
             raise FourFingerError(f"n_grasps must be an integer >= 1, got {n_grasps!r}")
+        if grasps not in GRASP_SETS:
+            raise FourFingerError(f"grasps must be one of {list(GRASP_SETS)}, got {grasps!r}")
+        if randomize is not None and physics is not None:
+            raise FourFingerError("give randomize (drawn per episode) or physics (fixed), not both")
         if render_mode not in (None, "rgb_array"):
             raise FourFingerError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if camera not in ("side", "top"):
@@ -196,6 +240,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.frame_skip = int(frame_skip)
         self.drop_weight = float(drop_weight)
         self.action_weight = float(action_weight)
+        self.rotation_cap = float(rotation_cap)
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
         self.physics = Physics(object, self.gravity, float(timestep), solver, bool(torsional))
@@ -205,6 +250,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             object,
             self.gravity,
             int(n_grasps),
+            seed=GRASP_SETS[grasps],
             timestep=float(timestep),
             frame_skip=self.frame_skip,
         )
@@ -219,8 +265,18 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._lo, self._hi = self.observation_space.low, self.observation_space.high
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._quat = np.zeros(4)
+        self._quat0 = np.zeros(4)
         self._angle = 0.0
+        self._twist = 0.0
+        self._net = 0.0
         self._renderer: Any = None
+        self.randomize = randomize
+        self.scaler = None
+        if randomize is not None or physics is not None:
+            self.scaler = ModelScaler(self.model, self.data, self.physics.obj_body)
+            if physics is not None:
+                self.scaler.apply(physics)
+        self._prev_action = np.zeros(ff.NU)
 
     # -- observation ------------------------------------------------------------------------
     def observe(self) -> NDArray[np.float32]:
@@ -233,6 +289,16 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         c[:, :3] = pos
         c[:, 3] = fn
         return np.minimum(np.maximum(o, self._lo), self._hi)
+
+    def _sensed(self) -> NDArray[np.float32]:
+        """The observation with the episode's sensor noise (none without randomisation)."""
+        o = self.observe()
+        if self.scaler is None or not any(self.scaler.current.noise):
+            return o
+        n = self.scaler.noise(self.np_random, ff.NQ, len(CONTACT_LINKS))
+        touching = o[2 * ff.NU + 3 :: 4] > 0
+        n[2 * ff.NU :].reshape(-1, 4)[~touching] = 0.0
+        return np.minimum(np.maximum(o + n, self._lo), self._hi).astype(np.float32)
 
     def _yaw_rate(self, quat_before: NDArray[np.float64]) -> float:
         """Mean angular velocity about world +z since ``quat_before`` [rad/s]."""
@@ -250,12 +316,16 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):
             raise FourFingerError(f"options['grasp'] must be in [0, {len(self.grasps)}), got {i!r}")
         m, d = self.model, self.data
+        if self.randomize is not None:
+            self.scaler.apply(self.randomize.sample(self.np_random, ff.NU))  # type: ignore[union-attr]
+        self._prev_action[:] = 0.0
         mujoco.mj_resetData(m, d)
         d.qpos[:] = self.grasps.qpos[i]
         d.ctrl[:] = self.grasps.ctrl[i]
         mujoco.mj_forward(m, d)
-        self._angle = 0.0
-        return self.observe(), {"grasp": i, "rotation_angle": 0.0}
+        self._angle = self._twist = self._net = 0.0
+        self._quat0[:] = self.physics.object_quat()
+        return self._sensed(), {"grasp": i, "rotation_angle": 0.0, "net_turn": 0.0}
 
     def step(
         self, action: NDArray[np.float32]
@@ -266,6 +336,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if not np.isfinite(a).all():
             raise FourFingerError(f"action contains NaN or inf: {a}")
         a = np.minimum(np.maximum(a, -1.0), 1.0)  # np.clip's Python wrapper costs 3x more
+        if self.scaler is not None and self.scaler.current.latency:
+            a, self._prev_action = self._prev_action, a  # one policy step late
         d, ph = self.data, self.physics
         ctrl = d.ctrl + a * self.max_setpoint_step
         np.minimum(np.maximum(ctrl, ph.ctrl_lo, out=ctrl), ph.ctrl_hi, out=d.ctrl)
@@ -273,15 +345,24 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         mujoco.mj_step(self.model, d, nstep=self.frame_skip)
         rate = self._yaw_rate(self._quat)
         self._angle += rate * self.dt
+        twist = z_twist(self._quat0, ph.object_quat())
+        self._net += math.remainder(twist - self._twist, 2.0 * math.pi)
+        self._twist = twist
         dropped = ph.dropped()
+        cap = self.rotation_cap
         terms = {
-            "rotation": rate,
+            "rotation": rate if -cap <= rate <= cap else math.copysign(cap, rate),
             "drop": -self.drop_weight if dropped else 0.0,
             "action": -self.action_weight * float(a @ a) / ff.NU,
         }
         reward = terms["rotation"] + terms["drop"] + terms["action"]
-        info = {**terms, "dropped": dropped, "rotation_angle": self._angle}
-        return self.observe(), reward, dropped, False, info
+        info = {
+            **terms,
+            "dropped": dropped,
+            "rotation_angle": self._angle,
+            "net_turn": self._net,
+        }
+        return self._sensed(), reward, dropped, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """An RGB frame (``height, width, 3``) from the side or top camera."""

@@ -1,0 +1,218 @@
+"""Randomised physics, held-out start grasps and the net-turn measure of the four-finger
+rotation env (issue 29): read back from the MjModel, MjData and the observation."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from envs.four_finger import (
+    CONTACT_LINKS,
+    FourFingerError,
+    FourFingerRotate,
+    PhysicsSample,
+    Randomization,
+    corners,
+    grasp_cache,
+    yaw_rate,
+    z_twist,
+)
+from envs.four_finger.cache import GRASP_SETS
+from ihm.hands import four_finger as ff
+
+
+def _quat(axis, angle) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(q, np.asarray(axis, float), angle)
+    return q
+
+
+def _mul(a, b) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, a, b)
+    return q
+
+
+def _turns(quats, dt=0.05) -> tuple[float, float]:
+    """(summed per-step z rotation, unwrapped net z twist) along a quaternion trajectory, as
+    the env accumulates them."""
+    summed = net = prev = 0.0
+    for q0, q1 in zip(quats[:-1], quats[1:], strict=True):
+        summed += yaw_rate(q0, q1, dt) * dt
+        tw = z_twist(quats[0], q1)
+        net += math.remainder(tw - prev, 2 * math.pi)
+        prev = tw
+    return summed, net
+
+
+def test_net_turn_equals_summed_rotation_about_z() -> None:
+    """A pure rotation about z through several full turns: the net twist (unwrapped) is the
+    summed rotation, both the true angle."""
+    start = _quat([1, 2, 0.5], 0.7)  # any start orientation
+    angles = np.linspace(0.0, 3.3 * 2 * np.pi, 400)
+    quats = [_mul(_quat([0, 0, 1], a), start) for a in angles]
+    summed, net = _turns(quats)
+    assert summed == pytest.approx(angles[-1], rel=1e-9)
+    assert net == pytest.approx(angles[-1], rel=1e-9)
+    back = [_mul(_quat([0, 0, 1], -a), start) for a in angles]
+    assert _turns(back)[1] == pytest.approx(-angles[-1], rel=1e-9)
+
+
+def test_net_turn_is_smaller_than_summed_rotation_when_tumbling() -> None:
+    """A tumbling trajectory: world angular velocity ``(a cos(phi t), a sin(phi t), w)``, a
+    steady turn about z plus a horizontal spin whose axis circles, integrated in fine steps.
+    The per-step z rotations add up to about ``w T`` (what the reward sums), but the object's
+    heading turns less: the tumble's cone costs twist, the overstatement the issue measured
+    on the sphere (summed 1.62 against 1.50 rad/s)."""
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    quats = [q]
+    a, phi, w, dt, sub = 2.0, 6.0, 1.0, 0.05, 10
+    for k in range(400):
+        for j in range(sub):
+            t = (k * sub + j) * dt / sub
+            om = np.array([a * np.cos(phi * t), a * np.sin(phi * t), w])
+            q = _mul(_quat(om / np.linalg.norm(om), np.linalg.norm(om) * dt / sub), q)
+        quats.append(q)
+    summed, net = _turns(quats)
+    assert summed == pytest.approx(w * 20.0, rel=0.02)
+    assert 0.0 < net < 0.8 * summed
+
+
+def test_env_reports_net_turn_and_caps_the_rotation_reward() -> None:
+    env = FourFingerRotate(rotation_cap=0.2)
+    obs, info = env.reset(seed=3)
+    assert info["net_turn"] == 0.0
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        obs, r, term, _, info = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
+        assert abs(info["rotation"]) <= 0.2 + 1e-12 and r == pytest.approx(info["rotation"])
+        if term:
+            break
+    tw = z_twist(env._quat0, env.physics.object_quat())
+    assert math.remainder(info["net_turn"] - tw, 2 * np.pi) == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(FourFingerError, match="rotation_cap"):
+        FourFingerRotate(rotation_cap=0.0)
+
+
+def test_heldout_grasps_are_not_training_grasps() -> None:
+    """The test set comes from a disjoint generator seed: no test grasp is within 1e-6 of any
+    training grasp (256 training, 100 test), and both are valid held grasps."""
+    assert GRASP_SETS["train"] != GRASP_SETS["test"]
+    train = grasp_cache("sphere", True, 256, seed=GRASP_SETS["train"])
+    test = grasp_cache("sphere", True, 100, seed=GRASP_SETS["test"])
+    d = np.linalg.norm(train.qpos[:, None, :] - test.qpos[None, :, :], axis=2)
+    assert d.min() > 1e-3
+    env = FourFingerRotate(grasps="test", n_grasps=100)
+    np.testing.assert_array_equal(env.grasps.qpos, test.qpos)
+    with pytest.raises(FourFingerError, match="grasps"):
+        FourFingerRotate(grasps="validation")
+
+
+def test_fixed_physics_is_read_back_from_mujoco() -> None:
+    """A corner's scales land in the MjModel (pair friction, mass, inertia, servo gain), and the
+    contacts MuJoCo makes carry the scaled friction."""
+    nominal = FourFingerRotate()
+    s = PhysicsSample(friction=0.5, torsional=1.5, mass=2.0, gain=0.8)
+    env = FourFingerRotate(physics=s)
+    m0, m = nominal.model, env.model
+    b = env.physics.obj_body
+    assert m.body_mass[b] == pytest.approx(2.0 * m0.body_mass[b])
+    np.testing.assert_allclose(m.body_inertia[b], 2.0 * m0.body_inertia[b])
+    assert m.body_subtreemass[b] == pytest.approx(2.0 * m0.body_subtreemass[b])
+    np.testing.assert_allclose(m.actuator_gainprm[:, 0], 0.8 * m0.actuator_gainprm[:, 0])
+    np.testing.assert_allclose(m.actuator_biasprm[:, 1], 0.8 * m0.actuator_biasprm[:, 1])
+    env.reset(seed=0)
+    env.step(np.zeros(12, np.float32))
+    d = env.data
+    obj = [
+        i
+        for i in range(d.ncon)
+        if b in (m.geom_bodyid[d.contact.geom1[i]], m.geom_bodyid[d.contact.geom2[i]])
+        and m.geom_bodyid[d.contact.geom1[i]] != 0
+    ]
+    assert obj, "the start grasp touches the object"
+    for i in obj:
+        fr = d.contact.friction[i]
+        assert fr[0] == pytest.approx(0.5 * 1.0) and fr[2] == pytest.approx(1.5 * 0.005)
+    # the servo force follows the scaled gain: kp * (ctrl - q)
+    mujoco.mj_forward(m, d)
+    q = d.qpos[: ff.NQ]
+    np.testing.assert_allclose(d.actuator_force, np.clip(0.8 * (d.ctrl - q), -0.5, 0.5), atol=1e-9)
+
+
+def test_randomization_draws_within_ranges_and_changes_each_episode() -> None:
+    r = Randomization()
+    env = FourFingerRotate(randomize=r)
+    b = env.physics.obj_body
+    m0 = FourFingerRotate().model
+    masses, lat = [], []
+    for k in range(40):
+        env.reset(seed=k) if k == 0 else env.reset()
+        s = env.scaler.current
+        m = env.model
+        assert r.friction[0] <= s.friction <= r.friction[1]
+        assert r.mass[0] <= s.mass <= r.mass[1]
+        assert m.body_mass[b] == pytest.approx(s.mass * m0.body_mass[b])
+        p = env.scaler.obj_pairs
+        np.testing.assert_allclose(m.pair_friction[p, 0], s.friction * m0.pair_friction[p, 0])
+        np.testing.assert_allclose(m.pair_friction[p, 2], s.torsional * m0.pair_friction[p, 2])
+        g = m.actuator_gainprm[:, 0] / m0.actuator_gainprm[:, 0]
+        assert np.all((g >= r.gain[0] - 1e-12) & (g <= r.gain[1] + 1e-12))
+        masses.append(s.mass)
+        lat.append(s.latency)
+    assert min(masses) < 0.8 and max(masses) > 1.3 and 0 < np.mean(lat) < 1
+    # pairs of finger links with each other keep their friction
+    other = np.setdiff1d(np.arange(env.model.npair), env.scaler.obj_pairs)
+    assert len(other) and np.allclose(env.model.pair_friction[other], m0.pair_friction[other])
+
+
+def test_latency_applies_the_previous_action() -> None:
+    """With one step of latency the first action moves no setpoint and the second step applies
+    the first action."""
+    a1 = np.full(12, 0.5, np.float32)
+    a2 = np.full(12, -0.3, np.float32)
+    env = FourFingerRotate(physics=PhysicsSample(latency=1))
+    env.reset(seed=1)
+    c0 = env.data.ctrl.copy()
+    env.step(a1)
+    np.testing.assert_allclose(env.data.ctrl, c0)
+    env.step(a2)
+    lo, hi = env.physics.ctrl_lo, env.physics.ctrl_hi
+    np.testing.assert_allclose(env.data.ctrl, np.clip(c0 + 0.5 * 0.05, lo, hi))
+
+
+def test_sensor_noise_has_the_stated_spread() -> None:
+    """Observation minus the noise-free observation: joint noise of std 0.005 rad, contact
+    force noise 0.05 N on touching links, none on setpoints or on links without contact."""
+    noise = (0.005, 0.001, 0.05)
+    env = FourFingerRotate(physics=PhysicsSample(noise=noise))
+    env.reset(seed=2)
+    dq, dctrl, dfn, dfree = [], [], [], []
+    for _ in range(300):
+        clean = env.observe()
+        noisy = env._sensed()
+        diff = noisy.astype(float) - clean
+        dq.append(diff[: ff.NQ])
+        dctrl.append(diff[ff.NQ : 2 * ff.NU])
+        c = diff[2 * ff.NU :].reshape(len(CONTACT_LINKS), 4)
+        touching = clean[2 * ff.NU + 3 :: 4] > 0
+        dfn.append(c[touching, 3])
+        dfree.append(c[~touching].ravel())
+    assert np.std(np.concatenate(dq)) == pytest.approx(0.005, rel=0.1)
+    assert np.concatenate(dfn).size > 100
+    assert np.std(np.concatenate(dfn)) == pytest.approx(0.05, rel=0.15)
+    assert not np.any(np.concatenate(dctrl)) and not np.any(np.concatenate(dfree))
+
+
+def test_corners_cover_the_ranges() -> None:
+    c = corners()
+    assert len(c) == 16
+    assert {s.friction for s in c} == {0.5, 1.5} and {s.mass for s in c} == {0.5, 2.0}
+    assert all(s.latency == 1 and s.noise == (0.005, 0.001, 0.05) for s in c)
+    with pytest.raises(FourFingerError, match="mass"):
+        Randomization(mass=(2.0, 0.5))
+    with pytest.raises(FourFingerError, match="not both"):
+        FourFingerRotate(randomize=Randomization(), physics=PhysicsSample())

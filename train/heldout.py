@@ -1,0 +1,186 @@
+"""Held-out evaluation of a rotation policy, nominal and at the corners of its randomised
+physics: ``python -m train.heldout POLICY_DIR``.
+
+Every episode starts from a grasp of the ``test`` set (:data:`envs.four_finger.GRASP_SETS`):
+start grasps made by the same generator with a seed that no training run uses, episode
+``i`` from test grasp ``i`` (so 100 episodes use 100 different grasps, none of them a
+training grasp). The policy is deterministic; an episode lasts ``--seconds`` (20 s = 400
+policy steps) or ends at a drop, whose time so far counts.
+
+Measures per episode (:class:`train.evaluation.RotationEpisode`): the net turn (the
+unwrapped z twist of the object's orientation relative to its start,
+:func:`envs.four_finger.z_twist`) over the episode's time [rad/s], the summed per-step
+rotation about +z (what the reward adds up) and the drop. Reported: the mean net speed with
+a 95 % normal interval of the mean (``1.96 s / sqrt(n)``), the drop rate with its 95 %
+Wilson interval (:func:`train.stats.wilson_interval`).
+
+Writes ``eval_heldout.json`` and, with ``--corners``, ``robustness.csv`` (one row per corner
+of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each) to ``--out``
+(default: the policy directory).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from envs.four_finger import FourFingerRotate, PhysicsSample, Randomization, corners
+from stability.cli import ArgumentParser
+from train.evaluation import RotationEpisode, run_episodes
+from train.policy import SHIPPED, load_policy
+from train.stats import wilson_interval
+
+__all__ = ["evaluate_heldout", "main", "robustness", "summarize"]
+
+TEST_GRASPS = 100  # size of the held-out start-grasp set
+
+
+def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Means and 95 % intervals of a list of :class:`RotationEpisode` results."""
+    v = np.array([e["speed_rad_s"] for e in episodes])
+    n = len(v)
+    drops = int(sum(e["dropped"] for e in episodes))
+    half = 1.96 * float(v.std(ddof=1)) / math.sqrt(n) if n > 1 else math.nan
+    lo, hi = wilson_interval(drops, n)
+    return {
+        "episodes": n,
+        "speed_rad_s": float(v.mean()),
+        "speed_ci95": [float(v.mean()) - half, float(v.mean()) + half],
+        "speed_median_rad_s": float(np.median(v)),
+        "speed_p10_rad_s": float(np.percentile(v, 10)),
+        "summed_rad_s": float(np.mean([e["summed_rad_s"] for e in episodes])),
+        "drops": drops,
+        "drop_rate": drops / n,
+        "drop_ci95": [lo, hi],
+    }
+
+
+def evaluate_heldout(
+    act: Callable[[np.ndarray], np.ndarray],
+    env_kwargs: dict[str, Any],
+    episodes: int = 100,
+    seconds: float = 20.0,
+    physics: PhysicsSample | None = None,
+    n_envs: int = 10,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """``episodes`` deterministic episodes from test grasps ``0 .. episodes - 1`` (at most
+    :data:`TEST_GRASPS`) under ``physics`` (nominal: ``None``); :func:`summarize` of them
+    plus ``grasps`` (the test-grasp index of each episode, in the order they ended).
+
+    ``act`` maps a batch of observations to a batch of actions; ``seed`` seeds the envs'
+    sensor noise."""
+    if not 1 <= episodes <= TEST_GRASPS:
+        raise ValueError(f"episodes must be in [1, {TEST_GRASPS}], got {episodes}")
+    kw = {**env_kwargs, "grasps": "test", "n_grasps": TEST_GRASPS, "physics": physics}
+    k = max(1, min(n_envs, episodes))
+    envs = [FourFingerRotate(**kw) for _ in range(k)]
+    for i, env in enumerate(envs):
+        env.reset(seed=seed + i)
+    first = np.cumsum([0] + [(episodes + i) // k for i in range(k)])
+    steps = int(round(seconds / envs[0].dt))
+    eps = run_episodes(
+        envs,
+        episodes,
+        act,
+        _Recorder,
+        reset_options=lambda i, j: {"grasp": int(first[i] + j)},
+        max_steps=steps,
+    )
+    for env in envs:
+        env.close()
+    return {**summarize(eps), "grasps": [e["grasp"] for e in eps], "seconds": seconds}
+
+
+class _Recorder(RotationEpisode):
+    """:class:`RotationEpisode` that also keeps the start grasp's index."""
+
+    def __init__(self, env: Any, obs: Any = None, info: dict[str, Any] | None = None) -> None:
+        super().__init__(env, obs, info)
+        self.grasp = int((info or {}).get("grasp", -1))
+
+    def result(self) -> dict[str, Any]:
+        return {**super().result(), "grasp": self.grasp}
+
+
+def _corner_job(args: tuple[str, PhysicsSample, int, float]) -> dict[str, Any]:
+    policy_dir, physics, episodes, seconds = args
+    import torch
+
+    torch.set_num_threads(1)
+    act, kw = load_policy(Path(policy_dir))
+    res = evaluate_heldout(act, kw, episodes, seconds, physics=physics)
+    res.pop("grasps")
+    return {"corner": physics.label(), **res}
+
+
+def robustness(
+    policy_dir: Path,
+    episodes: int = 20,
+    seconds: float = 20.0,
+    randomization: Randomization | None = None,
+    workers: int = 2,
+) -> list[dict[str, Any]]:
+    """:func:`evaluate_heldout` at every corner of ``randomization`` (default: the env's
+    :class:`Randomization`), ``episodes`` per corner, ``workers`` processes."""
+    jobs = [(str(policy_dir), c, episodes, seconds) for c in corners(randomization)]
+    if workers <= 1:
+        return [_corner_job(j) for j in jobs]
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_corner_job, jobs))
+
+
+def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    p = ArgumentParser(prog="python -m train.heldout", description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("policy", nargs="?", default=str(SHIPPED), help="policy or run directory")
+    p.add_argument("--episodes", type=int, default=100, help="held-out episodes (<= 100)")
+    p.add_argument("--seconds", type=float, default=20.0, help="episode length [s]")
+    p.add_argument("--corners", action="store_true", help="also evaluate at the corners")
+    p.add_argument("--corner-episodes", type=int, default=20, help="episodes per corner")
+    p.add_argument("--workers", type=int, default=2, help="processes for --corners")
+    p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
+    a = p.parse_args(argv)
+    if not 1 <= a.episodes <= TEST_GRASPS or a.corner_episodes < 1 or a.seconds <= 0:
+        p.error(f"--episodes must be in [1, {TEST_GRASPS}], --corner-episodes >= 1, --seconds > 0")
+    policy = Path(a.policy)
+    out = Path(a.out) if a.out else policy
+    out.mkdir(parents=True, exist_ok=True)
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    act, kw = load_policy(policy)
+    res = evaluate_heldout(act, kw, a.episodes, a.seconds)
+    (out / "eval_heldout.json").write_text(json.dumps(res, indent=2) + "\n")
+    print(_line(f"{policy} nominal", res))
+    result: dict[str, Any] = {"nominal": res}
+    if a.corners:
+        rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers)
+        cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
+        with (out / "robustness.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()})
+        for r in rows:
+            print(_line(r["corner"], r))
+        ok = all(r["speed_rad_s"] >= 0.5 and r["drop_rate"] <= 0.05 for r in rows)
+        print(f"every corner >= 0.5 rad/s and <= 5 % drops: {ok}")
+        result["corners"] = rows
+    return result
+
+
+def _line(name: str, r: dict[str, Any]) -> str:
+    return (
+        f"{name}: {r['episodes']} x {r['seconds']:g} s, net {r['speed_rad_s']:.3f} rad/s "
+        f"(summed {r['summed_rad_s']:.3f}), drops {r['drops']}/{r['episodes']}"
+    )
+
+
+if __name__ == "__main__":
+    main()
