@@ -24,10 +24,17 @@ from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
 from train.evaluation import RotationEpisode, one_by_one, run_episodes
 from train.rotation import env_physics
 
-__all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy"]
+__all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy", "policy_dir"]
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "four_finger_sphere"
+
+
+def policy_dir(run_dir: Path) -> Path:
+    """The directory of a run's policy: ``run_dir/best`` when the run kept its best validated
+    checkpoint there (:class:`train.rotation.EvalCallback`), else ``run_dir``."""
+    best = Path(run_dir) / "best"
+    return best if (best / "model.zip").is_file() else Path(run_dir)
 
 
 def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:

@@ -3,8 +3,10 @@
 Trains the rotation configuration (:mod:`train.rotation`; every option after the seeds
 options is passed on, so ``python -m train.ppo seeds --seeds 3`` trains the default main job)
 once per seed ``--first-seed .. --first-seed + --seeds - 1``, one after the other, then
-evaluates each final policy on the held-out start grasps (:func:`train.heldout.evaluate_heldout`:
-``--episodes`` episodes of 20 s from test grasps no training run uses) and writes to ``--out``:
+evaluates each run's policy (its best validated checkpoint, ``best/``, when it kept one:
+:func:`train.policy.policy_dir`) on the held-out start grasps
+(:func:`train.heldout.evaluate_heldout`: ``--episodes`` episodes of 20 s from test grasps no
+training run uses) and writes to ``--out``:
 
     seeds.csv   one row per seed: env steps, training wall time, net speed [rad/s] with its
                 95 % interval, summed per-step speed, drops with the 95 % Wilson interval
@@ -31,7 +33,7 @@ from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train import rotation
 from train.heldout import TEST_GRASPS, evaluate_heldout
-from train.policy import load_policy
+from train.policy import load_policy, policy_dir
 
 __all__ = ["evaluate_runs", "main", "plot_seeds"]
 
@@ -45,7 +47,7 @@ def evaluate_runs(runs: Sequence[Path], episodes: int = TEST_GRASPS) -> list[dic
     """One :data:`COLUMNS` row per run directory: its held-out evaluation and training size."""
     rows = []
     for run in runs:
-        act, kw = load_policy(run)
+        act, kw = load_policy(policy_dir(run))
         r = evaluate_heldout(act, kw, episodes)
         cfg = json.loads((run / "config.json").read_text())
         ev = json.loads((run / "eval.json").read_text()) if (run / "eval.json").is_file() else {}

@@ -41,7 +41,7 @@ detection, as in every MuJoCo env.
 
 ## Rewards
 
-``reward = rotation + drop + action`` with every term in ``info``:
+``reward = rotation + drop + action + height`` with every term in ``info``:
 
 - ``rotation``: the object's mean angular velocity about the world +z axis over
   the policy step, ``[log(R_t R_{t-1}^T)]_z / dt`` [rad/s] (positive:
@@ -49,7 +49,12 @@ detection, as in every MuJoCo env.
   ``[-rotation_cap, rotation_cap]`` (default ``inf``: the thesis' uncapped reward);
 - ``drop``: ``-drop_weight`` on the step that ends the episode by a drop
   (default weight 0, the thesis' setup);
-- ``action``: ``-action_weight * |a|^2 / 12`` (default 0).
+- ``action``: ``-action_weight * |a|^2 / 12`` (default 0);
+- ``height``: ``-height_weight * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)``, the object's sag
+  below ``HOLD_Z`` (0.07 m; the start grasps hold it at about 0.077 m) as a fraction of the way
+  to the drop threshold ``DROP_Z`` (default weight 0). Without it, trained policies carried
+  the sphere in a low two-finger pinch 2-10 mm above the drop threshold, where a small sag
+  ends the episode (docs/four_finger.md).
 
 ## Episode End
 
@@ -95,6 +100,7 @@ from numpy.typing import NDArray
 from envs.four_finger.cache import GRASP_SETS, grasp_cache
 from envs.four_finger.physics import (
     CONTACT_LINKS,
+    DROP_Z,
     FRAME_SKIP,
     MAX_FORCE,
     TIMESTEP,
@@ -105,9 +111,10 @@ from envs.four_finger.physics import (
 from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
 from ihm.hands import four_finger as ff
 
-__all__ = ["N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
+__all__ = ["HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
 
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
+HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
 
 
 def yaw_rate(quat_before: NDArray[np.float64], quat_after: NDArray[np.float64], dt: float) -> float:
@@ -191,6 +198,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         timestep: float = TIMESTEP,
         drop_weight: float = 0.0,
         action_weight: float = 0.0,
+        height_weight: float = 0.0,
         rotation_cap: float = math.inf,
         randomize: Randomization | None = None,
         physics: PhysicsSample | None = None,
@@ -211,6 +219,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             ("timestep", timestep),
             ("drop_weight", drop_weight),
             ("action_weight", action_weight),
+            ("height_weight", height_weight),
         ):
             if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -240,6 +249,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.frame_skip = int(frame_skip)
         self.drop_weight = float(drop_weight)
         self.action_weight = float(action_weight)
+        self.height_weight = float(height_weight)
         self.rotation_cap = float(rotation_cap)
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
@@ -300,6 +310,12 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         n[2 * ff.NU :].reshape(-1, 4)[~touching] = 0.0
         return np.minimum(np.maximum(o + n, self._lo), self._hi).astype(np.float32)
 
+    def _sag(self) -> float:
+        """How far the object's centre sits below ``HOLD_Z``, as a fraction of the way down to
+        ``DROP_Z``: ``max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` (1 at the drop threshold)."""
+        z = float(self.physics.object_pos()[2])
+        return max(0.0, HOLD_Z - z) / (HOLD_Z - DROP_Z)
+
     def _yaw_rate(self, quat_before: NDArray[np.float64]) -> float:
         """Mean angular velocity about world +z since ``quat_before`` [rad/s]."""
         return yaw_rate(quat_before, self.physics.object_quat(), self.dt)
@@ -354,8 +370,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "rotation": rate if -cap <= rate <= cap else math.copysign(cap, rate),
             "drop": -self.drop_weight if dropped else 0.0,
             "action": -self.action_weight * float(a @ a) / ff.NU,
+            "height": -self.height_weight * self._sag(),
         }
-        reward = terms["rotation"] + terms["drop"] + terms["action"]
+        reward = terms["rotation"] + terms["drop"] + terms["action"] + terms["height"]
         info = {
             **terms,
             "dropped": dropped,

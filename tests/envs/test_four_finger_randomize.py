@@ -216,3 +216,23 @@ def test_corners_cover_the_ranges() -> None:
         Randomization(mass=(2.0, 0.5))
     with pytest.raises(FourFingerError, match="not both"):
         FourFingerRotate(randomize=Randomization(), physics=PhysicsSample())
+
+
+def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
+    """``height = -w * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` of the object's centre after the
+    step: 0 for a grasp held high, -w/2 halfway down, and part of the reward."""
+    from envs.four_finger import DROP_Z
+    from envs.four_finger.env import HOLD_Z
+
+    env = FourFingerRotate(height_weight=2.0)
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.zeros(12, np.float32))
+    z = env.physics.object_pos()[2]
+    assert z > HOLD_Z and info["height"] == 0.0
+    env.data.qpos[env.physics.obj_qpos + 2] = 0.5 * (HOLD_Z + DROP_Z)
+    assert env._sag() == pytest.approx(0.5)
+    _, r, _, _, info = env.step(np.zeros(12, np.float32))
+    z = env.physics.object_pos()[2]
+    assert info["height"] == pytest.approx(-2.0 * max(0.0, HOLD_Z - z) / (HOLD_Z - DROP_Z))
+    assert info["height"] < -0.5
+    assert r == pytest.approx(info["rotation"] + info["drop"] + info["action"] + info["height"])
