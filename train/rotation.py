@@ -99,6 +99,7 @@ THESIS: dict[str, Any] = {
     "learning_rate": 1e-4,
     "episode_steps": 64,
     "rotation_cap": float("inf"),
+    "height_weight": 0.0,
     "drop_weight": 0.0,
     "randomize": False,
     "lr_schedule": "constant",
@@ -132,7 +133,7 @@ class RotateConfig:
         choices=("none", "qp"),
     )
     shield_backend: str = opt("daqp", "QP backend of --shield qp", choices=BACKENDS)
-    total_steps: int = opt(1_500_000, "env steps to train (with --resume: steps to add)")
+    total_steps: int = opt(1_200_000, "env steps to train (with --resume: steps to add)")
     seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
     n_envs: int = opt(16, "parallel training envs")
     workers: int = opt(
@@ -158,10 +159,10 @@ class RotateConfig:
     log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
     drop_weight: float = opt(0.0, "env drop penalty weight (0: the thesis' reward)")
     height_weight: float = opt(
-        0.0, "weight of the env's height term (penalises the object sagging below 0.07 m)"
+        1.0, "weight of the env's height term (penalises the object sagging below 0.07 m)"
     )
     rotation_cap: float = opt(
-        float("inf"), "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
+        1.0, "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
     )
     randomize: bool = opt(
         False,
