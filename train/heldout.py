@@ -15,8 +15,9 @@ a 95 % normal interval of the mean (``1.96 s / sqrt(n)``), the drop rate with it
 Wilson interval (:func:`train.stats.wilson_interval`).
 
 Writes ``eval_heldout.json`` and, with ``--corners``, ``robustness.csv`` (one row per corner
-of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each) to ``--out``
-(default: the policy directory).
+of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with ``--factors``
+``factors.csv`` (one factor at a time, :func:`factors`) to ``--out`` (default: the policy
+directory).
 """
 
 from __future__ import annotations
@@ -111,6 +112,23 @@ class _Recorder(RotationEpisode):
         return {**super().result(), "grasp": self.grasp}
 
 
+def factors(r: Randomization | None = None) -> list[PhysicsSample]:
+    """One factor of ``r`` at a time, each bound on its own, nominal otherwise: friction,
+    torsional friction, mass and gain at each bound, one step of latency, the sensor noise
+    (what ``--factors`` evaluates: which factor a corner's failure comes from)."""
+    r = r or Randomization()
+    out = [
+        PhysicsSample(**{k: v})
+        for k in ("friction", "torsional", "mass", "gain")
+        for v in getattr(r, k)
+    ]
+    return [
+        *out,
+        PhysicsSample(latency=1),
+        PhysicsSample(noise=(r.noise_joint, r.noise_pos, r.noise_force)),
+    ]
+
+
 def _corner_job(args: tuple[str, PhysicsSample, int, float]) -> dict[str, Any]:
     policy_dir, physics, episodes, seconds = args
     import torch
@@ -128,10 +146,13 @@ def robustness(
     seconds: float = 20.0,
     randomization: Randomization | None = None,
     workers: int = 2,
+    single: bool = False,
 ) -> list[dict[str, Any]]:
     """:func:`evaluate_heldout` at every corner of ``randomization`` (default: the env's
-    :class:`Randomization`), ``episodes`` per corner, ``workers`` processes."""
-    jobs = [(str(policy_dir), c, episodes, seconds) for c in corners(randomization)]
+    :class:`Randomization`; ``single``: at each of its :func:`factors` instead), ``episodes``
+    per case, ``workers`` processes."""
+    cases = corners(randomization) if not single else factors(randomization)
+    jobs = [(str(policy_dir), c, episodes, seconds) for c in cases]
     if workers <= 1:
         return [_corner_job(j) for j in jobs]
     with ProcessPoolExecutor(workers) as pool:
@@ -144,6 +165,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     p.add_argument("--episodes", type=int, default=100, help="held-out episodes (<= 100)")
     p.add_argument("--seconds", type=float, default=20.0, help="episode length [s]")
     p.add_argument("--corners", action="store_true", help="also evaluate at the corners")
+    p.add_argument("--factors", action="store_true", help="also one factor at a time")
     p.add_argument("--corner-episodes", type=int, default=20, help="episodes per corner")
     p.add_argument("--workers", type=int, default=2, help="processes for --corners")
     p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
@@ -161,18 +183,28 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     result: dict[str, Any] = {"nominal": res}
     if a.corners:
         rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers)
-        cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
-        with (out / "robustness.csv").open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()})
+        _write_rows(out / "robustness.csv", rows)
         for r in rows:
             print(_line(r["corner"], r))
         ok = all(r["speed_rad_s"] >= 0.5 and r["drop_rate"] <= 0.05 for r in rows)
         print(f"every corner >= 0.5 rad/s and <= 5 % drops: {ok}")
         result["corners"] = rows
+    if a.factors:
+        rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers, single=True)
+        _write_rows(out / "factors.csv", rows)
+        for r in rows:
+            print(_line(r["corner"], r))
+        result["factors"] = rows
     return result
+
+
+def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()})
 
 
 def _line(name: str, r: dict[str, Any]) -> str:

@@ -55,3 +55,16 @@ def test_seeds_command_evaluates_runs(tmp_path) -> None:
     assert float(row["speed_lo"]) <= float(row["speed_rad_s"]) <= float(row["speed_hi"])
     assert float(row["drop_lo"]) <= float(row["drop_rate"]) <= float(row["drop_hi"])
     assert (tmp_path / "seeds.png").stat().st_size > 10_000
+
+
+def test_factors_change_one_thing_at_a_time() -> None:
+    from envs.four_finger import PhysicsSample, Randomization
+    from train.heldout import factors
+
+    nominal = PhysicsSample()
+    f = factors(Randomization())
+    assert len(f) == 10
+    for s in f:
+        changed = [k for k in ("friction", "torsional", "mass", "gain", "latency", "noise")
+                   if getattr(s, k) != getattr(nominal, k)]  # fmt: skip
+        assert len(changed) == 1, s
