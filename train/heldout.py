@@ -22,7 +22,6 @@ directory).
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -35,8 +34,10 @@ import numpy as np
 
 from envs.four_finger import FourFingerRotate, PhysicsSample, Randomization, corners
 from stability.cli import ArgumentParser
+from stability.io import write_csv
 from train.evaluation import RotationEpisode, run_episodes
 from train.policy import SHIPPED, load_policy
+from train.rotation import MAX_DROP_RATE, TARGET_SPEED
 from train.stats import wilson_interval
 
 __all__ = ["evaluate_heldout", "main", "robustness", "summarize"]
@@ -181,30 +182,26 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     (out / "eval_heldout.json").write_text(json.dumps(res, indent=2) + "\n")
     print(_line(f"{policy} nominal", res))
     result: dict[str, Any] = {"nominal": res}
-    if a.corners:
-        rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers)
-        _write_rows(out / "robustness.csv", rows)
+    for name, wanted, single in (("corners", a.corners, False), ("factors", a.factors, True)):
+        if not wanted:
+            continue
+        rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers, single=single)
+        cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
+        csv_rows = [
+            {k: round(v, 4) if isinstance(v, float) else v for k, v in r.items() if k in cols}
+            for r in rows
+        ]
+        write_csv(out / ("robustness.csv" if name == "corners" else "factors.csv"), csv_rows, cols)
         for r in rows:
             print(_line(r["corner"], r))
-        ok = all(r["speed_rad_s"] >= 0.5 and r["drop_rate"] <= 0.05 for r in rows)
-        print(f"every corner >= 0.5 rad/s and <= 5 % drops: {ok}")
-        result["corners"] = rows
-    if a.factors:
-        rows = robustness(policy, a.corner_episodes, a.seconds, workers=a.workers, single=True)
-        _write_rows(out / "factors.csv", rows)
-        for r in rows:
-            print(_line(r["corner"], r))
-        result["factors"] = rows
+        if name == "corners":
+            ok = all(
+                r["speed_rad_s"] >= TARGET_SPEED and r["drop_rate"] <= MAX_DROP_RATE for r in rows
+            )
+            target = f">= {TARGET_SPEED} rad/s and <= {MAX_DROP_RATE * 100:g} % drops"
+            print(f"every corner {target}: {ok}")
+        result[name] = rows
     return result
-
-
-def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
-    cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()})
 
 
 def _line(name: str, r: dict[str, Any]) -> str:

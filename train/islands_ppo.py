@@ -48,13 +48,13 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/IslandsBridges-v0 and ihm/IslandsBridgesRing-v0)
 from train.evaluation import evaluate_success
 from train.sb3 import (
     build_parser,
+    learning_rate,
     new_ppo,
     normalizer,
     open_run,
@@ -270,12 +270,7 @@ def run_name(cfg: Config) -> str:
 def build_model(cfg: Config, vec_env: VecEnv) -> PPO:
     """A fresh PPO with separate policy and value nets of the configured sizes
     (:func:`train.sb3.new_ppo`: ``seed=None``, call :func:`train.sb3.seed_everything` first)."""
-    learning_rate = (
-        cfg.learning_rate
-        if cfg.lr_schedule == "constant"
-        else LinearSchedule(cfg.learning_rate, 0.0, 1.0)
-    )
-    return new_ppo(cfg, vec_env, learning_rate)
+    return new_ppo(cfg, vec_env, learning_rate(cfg))
 
 
 class TrainStats(BaseCallback):

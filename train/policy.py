@@ -22,7 +22,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 
 from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
 from train.evaluation import RotationEpisode, one_by_one, run_episodes
-from train.rotation import env_physics
+from train.rotation import env_physics, policy_dir
 
 __all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy", "policy_dir"]
 
@@ -30,19 +30,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "four_finger_sphere"
 
 
-def policy_dir(run_dir: Path) -> Path:
-    """The directory of a run's policy: ``run_dir/best`` when the run kept its best validated
-    checkpoint there (:class:`train.rotation.EvalCallback`), else ``run_dir``."""
-    best = Path(run_dir) / "best"
-    return best if (best / "model.zip").is_file() else Path(run_dir)
-
-
 def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:
     """A deterministic ``obs -> action`` function and the run's env options.
 
     ``run_dir`` holds ``policy.pt`` (SB3 ``ActorCriticPolicy.save``) or ``model.zip``, plus
-    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``.
+    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``; a training run
+    that kept a best validated checkpoint is read from its ``best/``
+    (:func:`train.rotation.policy_dir`), the policy its evaluations and export name.
     """
+    run_dir = policy_dir(Path(run_dir))
     if (run_dir / "policy.pt").is_file():
         policy = ActorCriticPolicy.load(str(run_dir / "policy.pt"), device="cpu")
     else:

@@ -55,6 +55,7 @@ from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
 from train.sb3 import (
     build_parser,
+    learning_rate,
     new_ppo,
     normalizer,
     open_run,
@@ -84,6 +85,7 @@ __all__ = [
     "monitor_returns",
     "parse_config",
     "plot_curve",
+    "policy_dir",
     "steps_label",
 ]
 
@@ -268,12 +270,11 @@ def make_env(
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
-    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), constant lr;
+    """PPO with separate policy and value nets (``cfg.pi``, ``cfg.vf``), the learning rate of
+    ``cfg.lr_schedule`` (:func:`train.sb3.learning_rate`);
     :class:`train.pipeline.PipelinedPPO`, which pipelines its rollouts over a
     ``ChunkedVecEnv`` with parts and is plain SB3 PPO on any other env."""
-    lr = cfg.learning_rate
-    schedule = (lambda rest: lr * rest) if cfg.lr_schedule == "linear" else lr
-    return new_ppo(cfg, vec_env, schedule, algo=PipelinedPPO)
+    return new_ppo(cfg, vec_env, learning_rate(cfg), algo=PipelinedPPO)
 
 
 class RolloutThreads(BaseCallback):
@@ -376,13 +377,20 @@ def checkpoint(model: PPO, run_dir: Path) -> None:
         (run_dir / "vecnormalize.tmp.pkl").replace(run_dir / "vecnormalize.pkl")
 
 
+def policy_dir(run_dir: Path) -> Path:
+    """The directory of a run's policy: ``run_dir/best`` when the run kept its best validated
+    checkpoint there (:class:`EvalCallback`), else ``run_dir``."""
+    best = Path(run_dir) / "best"
+    return best if (best / "model.zip").is_file() else Path(run_dir)
+
+
 def export_policy(run_dir: Path, dest: Path) -> Path:
     """Copy a run's policy (weights only, ``ActorCriticPolicy.save``: no optimiser state) with
-    its ``vecnormalize.pkl`` (from ``best/`` when the run kept one, else the final model), and
-    the run's ``config.json``, ``eval.json``, ``eval.csv`` and ``curve.png`` to ``dest``: what
-    ``python -m train.gait`` and replaying need, a quarter of ``model.zip``'s size.
-    ``dest/best.json`` names the checkpoint exported."""
-    src = run_dir / "best" if (run_dir / "best" / "model.zip").is_file() else run_dir
+    its ``vecnormalize.pkl`` (:func:`policy_dir`: from ``best/`` when the run kept one, else the
+    final model), and the run's ``config.json``, ``eval.json``, ``eval.csv`` and ``curve.png``
+    to ``dest``: what ``python -m train.gait`` and replaying need, a quarter of ``model.zip``'s
+    size. ``dest/best.json`` names the checkpoint exported."""
+    src = policy_dir(run_dir)
     dest.mkdir(parents=True, exist_ok=True)
     PPO.load(src / "model.zip", device="cpu").policy.save(str(dest / "policy.pt"))
     shutil.copy(src / "vecnormalize.pkl", dest / "vecnormalize.pkl")

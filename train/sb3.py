@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 from tqdm import tqdm
 
@@ -33,6 +34,7 @@ from stability.cli import ArgumentParser
 __all__ = [
     "TqdmProgress",
     "build_parser",
+    "learning_rate",
     "new_ppo",
     "normalizer",
     "open_run",
@@ -149,6 +151,14 @@ def seed_everything(seed: int) -> None:
     np.random.seed(seed)  # noqa: NPY002  (SB3 and Gymnasium wrappers may use the global RNG)
     torch.manual_seed(seed)
     torch.backends.cudnn.deterministic = True
+
+
+def learning_rate(cfg: Any) -> float | Callable[[float], float]:
+    """``cfg.learning_rate``, constant, or with ``cfg.lr_schedule == "linear"`` decaying linearly
+    to 0 over the run (SB3's ``LinearSchedule``: ``lr * progress_remaining``)."""
+    if cfg.lr_schedule == "constant":
+        return cfg.learning_rate
+    return LinearSchedule(cfg.learning_rate, 0.0, 1.0)
 
 
 def new_ppo(

@@ -33,7 +33,7 @@ from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train import rotation
 from train.heldout import TEST_GRASPS, evaluate_heldout
-from train.policy import load_policy, policy_dir
+from train.policy import load_policy
 
 __all__ = ["evaluate_runs", "main", "plot_seeds"]
 
@@ -47,7 +47,7 @@ def evaluate_runs(runs: Sequence[Path], episodes: int = TEST_GRASPS) -> list[dic
     """One :data:`COLUMNS` row per run directory: its held-out evaluation and training size."""
     rows = []
     for run in runs:
-        act, kw = load_policy(policy_dir(run))
+        act, kw = load_policy(run)
         r = evaluate_heldout(act, kw, episodes)
         cfg = json.loads((run / "config.json").read_text())
         ev = json.loads((run / "eval.json").read_text()) if (run / "eval.json").is_file() else {}
@@ -86,20 +86,18 @@ def plot_seeds(rows: Sequence[dict[str, Any]], runs: Sequence[Path], out: Path) 
     fig, ax = plt.subplots(1, 3, figsize=(14, 4))
     x = np.arange(len(rows))
     labels = [str(r["seed"]) for r in rows]
-    sp = np.array([float(r["speed_rad_s"]) for r in rows])
-    err = np.array(
-        [[sp[i] - float(r["speed_lo"]), float(r["speed_hi"]) - sp[i]] for i, r in enumerate(rows)]
-    ).T
-    ax[0].errorbar(x, sp, yerr=err, fmt="o", capsize=4)
-    ax[0].axhline(rotation.TARGET_SPEED, color="gray", ls=":", label="target >= 0.5 rad/s")
-    ax[0].set_ylabel("net turn speed [rad/s]")
-    dr = np.array([float(r["drop_rate"]) for r in rows])
-    derr = np.array(
-        [[dr[i] - float(r["drop_lo"]), float(r["drop_hi"]) - dr[i]] for i, r in enumerate(rows)]
-    ).T
-    ax[1].errorbar(x, dr, yerr=derr, fmt="s", color="C3", capsize=4)
-    ax[1].axhline(0.05, color="gray", ls=":", label="target <= 5 %")
-    ax[1].set_ylabel("drop rate")
+    panels = (
+        ("speed_rad_s", "speed", "o", "C0", rotation.TARGET_SPEED, "target >= 0.5 rad/s",
+         "net turn speed [rad/s]"),
+        ("drop_rate", "drop", "s", "C3", rotation.MAX_DROP_RATE, "target <= 5 %", "drop rate"),
+    )  # fmt: skip
+    for a, (key, pre, fmt, color, target, label, ylabel) in zip(ax[:2], panels, strict=False):
+        v = np.array([float(r[key]) for r in rows])
+        lo = np.array([float(r[f"{pre}_lo"]) for r in rows])
+        hi = np.array([float(r[f"{pre}_hi"]) for r in rows])
+        a.errorbar(x, v, yerr=[v - lo, hi - v], fmt=fmt, color=color, capsize=4)
+        a.axhline(target, color="gray", ls=":", label=label)
+        a.set_ylabel(ylabel)
     n = rows[0]["episodes"] if rows else 0
     for a, t in zip(ax[:2], ("speed", "drops"), strict=True):
         a.set_xticks(x, labels)

@@ -147,8 +147,6 @@ class ModelScaler:
         c_n); the caller zeroes the slots of links without contact."""
         sq, sp, sf = self.current.noise
         out = np.zeros(2 * n_joints + 4 * n_links)
-        if not (sq or sp or sf):
-            return out
         out[:n_joints] = rng.normal(0.0, sq, n_joints) if sq else 0.0
         c = out[2 * n_joints :].reshape(n_links, 4)
         c[:, :3] = rng.normal(0.0, sp, (n_links, 3)) if sp else 0.0
