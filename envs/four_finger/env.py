@@ -27,7 +27,7 @@ Bounds: joints ``[-pi, pi]``, setpoints the ``ctrlrange``, contact positions
 | index | what | MJCF names | unit |
 |-------|------|------------|------|
 | 0-11  | joint positions ``q`` | joints ``f1_j0 .. f4_j2`` | rad |
-| 12-23 | actuator setpoints (``data.ctrl``) | actuators ``f1_j0 .. f4_j2`` | rad |
+| 12-23 | commanded setpoints (``data.ctrl``) | actuators ``f1_j0 .. f4_j2`` | rad |
 | 24-55 | 8 links x (x, y, z, c_n) | geoms ``f1_proximal .. f4_distal`` | m, N |
 
 Link ``k`` (0-7, order of :data:`CONTACT_LINKS`) fills ``24 + 4k .. 27 + 4k``: the
@@ -37,7 +37,11 @@ cone stores it as the contact's first ``efc_force`` row, the value
 ``mj_contactForce`` returns); all four zero when the link does not touch the
 object. Contacts between fingers, or of the object with the palm or floor, are
 not observed. Contact data come from the last physics substep's collision
-detection, as in every MuJoCo env.
+detection, as in every MuJoCo env. With one step of action latency (randomised physics) the
+servos still run on ``data.ctrl`` while the setpoint slots show what the controller last
+commanded, ``clip(data.ctrl + a_t * max_setpoint_step)`` for the action ``a_t`` not yet
+applied: a real controller knows what it sent, and without it the pending action is hidden
+state (the observation is not Markov).
 
 ## Rewards
 
@@ -294,6 +298,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         d, o = self.data, self._obs
         o[: ff.NQ] = d.qpos[: ff.NQ]
         o[ff.NQ : 2 * ff.NU] = d.ctrl
+        if self.scaler is not None and self.scaler.current.latency:
+            # the controller knows what it sent: the setpoint of the action still in flight
+            ph = self.physics
+            cmd = d.ctrl + self._prev_action * self.max_setpoint_step
+            o[ff.NQ : 2 * ff.NU] = np.minimum(np.maximum(cmd, ph.ctrl_lo), ph.ctrl_hi)
         pos, fn, _ = self.physics.link_contacts()
         c = o[2 * ff.NU :].reshape(len(CONTACT_LINKS), 4)
         c[:, :3] = pos

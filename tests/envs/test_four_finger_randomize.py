@@ -184,6 +184,26 @@ def test_latency_applies_the_previous_action() -> None:
     np.testing.assert_allclose(env.data.ctrl, np.clip(c0 + 0.5 * 0.05, lo, hi))
 
 
+def test_latency_observes_the_commanded_setpoint() -> None:
+    """Under latency the setpoint slots show the action in flight: after step(a1) they hold
+    the setpoints that the next step applies, while the servos still run on the old ones;
+    without latency they are ``data.ctrl``."""
+    a1 = np.full(12, 0.5, np.float32)
+    env = FourFingerRotate(physics=PhysicsSample(latency=1))
+    env.reset(seed=3)
+    c0 = env.data.ctrl.copy()
+    obs, *_ = env.step(a1)
+    np.testing.assert_allclose(env.data.ctrl, c0)  # not applied yet
+    shown = obs[ff.NQ : 2 * ff.NU].astype(float)
+    assert np.abs(shown - c0).max() > 0.01
+    env.step(np.zeros(12, np.float32))
+    np.testing.assert_allclose(shown, env.data.ctrl, atol=1e-6)
+    nominal = FourFingerRotate()
+    nominal.reset(seed=3)
+    obs, *_ = nominal.step(a1)
+    np.testing.assert_allclose(obs[ff.NQ : 2 * ff.NU], nominal.data.ctrl, atol=1e-6)
+
+
 def test_sensor_noise_has_the_stated_spread() -> None:
     """Observation minus the noise-free observation: joint noise of std 0.005 rad, contact
     force noise 0.05 N on touching links, none on setpoints or on links without contact."""
