@@ -7,6 +7,7 @@ Examples::
     python -m ihm show barrett_box --out box.png --rrd box.rrd
     python -m ihm show barrett_box --preload 0.3 0.3 0.3 0
     python -m ihm map barrett_box --plane xy --workers 2 --nonbackdrivable
+    python -m ihm batch barrett_box box.jsonl --directions 36   # for python -m stability.batch
 
 Errors (unknown scene, wrong preload length, a grasp that does not settle,
 no OpenGL context) print one line to stderr and exit with status 2.
@@ -148,9 +149,31 @@ def _parser() -> argparse.ArgumentParser:
         help="contact-normal uncertainty eta [deg] for the refinement method (default 0)",
     )
     mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
-    mp_.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    mp_.add_argument("--workers", type=int, default=1, help="processes (default 1); with "
+                     "--ray, the CPUs of a new local Ray cluster")  # fmt: skip
+    mp_.add_argument("--ray", metavar="ADDRESS", help="run the directions as Ray tasks: 'auto' "
+                     "(the running cluster, else a new local one), 'local' or a cluster address "
+                     "(needs pip install -e '.[ray]')")  # fmt: skip
     mp_.add_argument("--out", type=Path, default=Path("."), help="output folder (default .)")
     mp_.add_argument("--no-progress", action="store_true", help="no progress bar")
+    bt = sub.add_parser(
+        "batch",
+        help="write a map's queries as a batch file for python -m stability.batch",
+        description="Settle SCENE and write one MaxDisturbance query row per direction of its "
+        "resistible-force map (the queries of 'map --method M') to OUT, for "
+        "'python -m stability.batch OUT RESULTS' (local processes or a Ray cluster).",
+    )
+    bt.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    bt.add_argument("out", type=Path, help="query file to write (JSON lines)")
+    bt.add_argument("--plane", default="xy", help="two force axes (default xy)")
+    bt.add_argument("--directions", type=int, default=36, help="directions (default 36)")
+    bt.add_argument("--frame", default="world", help="axes of --plane: world or object")
+    bt.add_argument("--method", default="refinement", help="stability method written into "
+                    "each row (default refinement)")  # fmt: skip
+    bt.add_argument("--preload", type=float, nargs="+", metavar="F",
+                    help="commanded actuator forces (default: the scene's preload)")  # fmt: skip
+    bt.add_argument("--nonbackdrivable", action="store_true", help="ratchet the motor joints")
+    bt.add_argument("--cap", type=float, default=10.0, help="largest force asked [N] (10)")
     show.add_argument(
         "--no-contacts",
         action="store_true",
@@ -258,7 +281,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
         csv_path, png, walls, agree = run(
             args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
             args.cap, args.workers, args.out, progress=not args.no_progress,
-            methods=args.method, seat=args.seat, frame=args.frame, **opts,
+            methods=args.method, seat=args.seat, frame=args.frame, ray=args.ray, **opts,
         )  # fmt: skip
     except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
         print(f"{PROG} map: error: {exc}", file=sys.stderr)
@@ -291,6 +314,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _cmd_list()
     if args.command == "map":
         return _cmd_map(args)
+    if args.command == "batch":
+        from stability.batch import write_rows
+
+        from .sim_maps import MapError, scene_map_rows
+
+        try:
+            rows = scene_map_rows(args.scene, args.plane, args.directions, method=args.method,
+                                  preload=args.preload, nonbackdrivable=args.nonbackdrivable,
+                                  frame=args.frame, cap=args.cap)  # fmt: skip
+            n = write_rows(args.out, rows)
+        except (MapError, GraspError, OSError) as exc:
+            print(f"{PROG} batch: error: {exc}", file=sys.stderr)
+            return 2
+        print(f"{n} queries -> {args.out}")
+        return 0
     if args.width < 1 or args.height < 1:
         parser.error(f"--width and --height must be positive, got {args.width} x {args.height}")
     force_scale = getattr(args, "force_scale", None)

@@ -47,6 +47,7 @@ __all__ = [
     "check_options",
     "map_value",
     "plot_maps",
+    "scene_map_rows",
     "simulated_map",
     "write_map_csv",
 ]
@@ -150,6 +151,7 @@ def simulated_map(
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
+    ray: str | None = None,
     **resistance_kwargs: float,
 ) -> ResistibleMap:
     """Simulated resistible force per direction in ``plane`` (module doc).
@@ -160,7 +162,9 @@ def simulated_map(
     ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``frame``: the plane's
     axes are the world's (``"world"``) or the object's at rest (``"object"``: the thesis'
     axes, as each scene documents them); ``gravity=False``: no gravity anywhere (the mapped
-    force stands for the object's weight turned around); ``resistance_kwargs`` go to
+    force stands for the object's weight turned around); ``ray``: run the directions as Ray
+    tasks on that cluster (``"auto"``, ``"local"`` or an address; :mod:`stability.batch`)
+    instead of ``workers`` local processes; ``resistance_kwargs`` go to
     :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
     """
     check_options(plane, "sim", directions, workers, cap, frame)
@@ -172,7 +176,7 @@ def simulated_map(
         units = units @ rot.T
     dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
     out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops, gravity), progress,
-                    f"{scene} sim map")  # fmt: skip
+                    f"{scene} sim map", ray)  # fmt: skip
     mags = np.array([v for v, _ in out])
     capped = np.array([c for _, c in out], dtype=bool)
     return ResistibleMap(angles, mags, capped, float(cap), plane, "sim")
@@ -228,32 +232,25 @@ def analysis_map(
     cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
+    ray: str | None = None,
     **options: Any,
 ) -> ResistibleMap:
     """The stability method's resistible force per direction on the settled scene's grasp
     (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...).
     ``nonbackdrivable`` and ``seat`` settle the scene as :func:`simulated_map` does, so that
     both read the same grasp (the methods model every actuator as nonbackdrivable);
-    ``frame`` and ``gravity`` as there (no gravity: no base load)."""
-    from .contacts import grasp_from_mujoco
-
+    ``frame``, ``gravity`` and ``ray`` as there (no gravity: no base load)."""
     check_options(plane, method, directions, workers, cap, frame)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
-    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                                    seat=seat, gravity=gravity)  # fmt: skip
-    if scenes.last_ratchet is not None:
-        scenes.last_ratchet.release()
-    commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
-    grasp = grasp_from_mujoco(model, data)
-    com = model.body_ipos[model.body("object").id].copy()
+    grasp, commands, com = _settled_grasp(scene, preload, nonbackdrivable, seat, gravity)
     angles, units = _directions(plane, directions)
     if frame == "object":
         units = units @ grasp.object_mat.T
     jobs = [(u, float(cap)) for u in units]
     args = (grasp, commands, com, method, options)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
-                    f"{scene} {method} map")  # fmt: skip
+                    f"{scene} {method} map", ray)  # fmt: skip
     return ResistibleMap(
         angles,
         np.array([v for v, _ in out]),
@@ -264,9 +261,98 @@ def analysis_map(
     )
 
 
+def _settled_grasp(
+    scene: str,
+    preload: ArrayLike | None,
+    nonbackdrivable: bool,
+    seat: ArrayLike | None,
+    gravity: bool,
+) -> tuple[Any, np.ndarray, np.ndarray]:
+    """The settled scene's grasp (:class:`ihm.contacts.SceneGrasp`), the commands it was
+    settled with and the object's centre of mass in the object frame."""
+    from .contacts import grasp_from_mujoco
+
+    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
+                                    seat=seat, gravity=gravity)  # fmt: skip
+    if scenes.last_ratchet is not None:
+        scenes.last_ratchet.release()
+    commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
+    return grasp_from_mujoco(model, data), commands, model.body_ipos[model.body("object").id].copy()
+
+
+def scene_map_rows(
+    scene: str,
+    plane: str = "xy",
+    directions: int = 36,
+    *,
+    method: str = "refinement",
+    preload: ArrayLike | None = None,
+    nonbackdrivable: bool = False,
+    seat: ArrayLike | None = None,
+    frame: str = "world",
+    gravity: bool = True,
+    cap: float = 10.0,
+    options: dict[str, Any] | None = None,
+) -> list[dict[str, Any]]:
+    """The queries of :func:`analysis_map` as batch rows (:mod:`stability.batch`): one
+    MaxDisturbance per direction on the settled scene's grasp, the force through the object's
+    centre of mass, its weight as base load, the settled commands (``gws``: the rigid grasp,
+    no commands). Ids ``"<scene>-<plane>-<k>"``. ``python -m stability.batch`` on them gives
+    the map's values (tested)."""
+    from stability import Grasp
+    from stability.batch import map_rows
+
+    check_options(plane, method, directions, 1, cap, frame)
+    if method == "sim":
+        raise MapError("batch rows take a stability method, not 'sim'")
+    g, commands, com = _settled_grasp(scene, preload, nonbackdrivable, seat, gravity)
+    rigid = method == "gws"
+    grasp = Grasp(points=g.points, normals=g.normals, mu=g.mu) if rigid else g
+    full = None if rigid else (g.full_commands(commands) if hasattr(g, "full_commands")
+                               else commands)  # fmt: skip
+    return map_rows(grasp, plane=plane, directions=directions, cap=cap, base=g.gravity_wrench,
+                    commands=full, torque_point=com,
+                    rotation=None if frame == "object" else g.object_mat,
+                    id_prefix=f"{scene}-{plane}", method=method, options=options)  # fmt: skip
+
+
+def _with_init(token: str, init: Any, initargs: tuple, fn: Any, job: Any) -> Any:
+    """``fn(job)`` after ``init(*initargs)``, which runs once per worker process and map
+    (``token``): the set-up of a pool's initializer, for Ray's reused workers."""
+    if _STATE.get("_token") != token:
+        init(*initargs)
+        _STATE["_token"] = token
+    return fn(job)
+
+
 def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, progress: bool,
-              desc: str) -> list:  # fmt: skip
-    """``fn`` over ``jobs`` in this process (``workers`` 1) or a pool, in order, with a bar."""
+              desc: str, ray: str | None = None) -> list:  # fmt: skip
+    """``fn`` over ``jobs`` in this process (``workers`` 1), a local pool, or as Ray tasks on
+    the cluster at ``ray`` (:class:`stability.batch.RayExecutor`; ``workers`` then sizes a new
+    local cluster), in order, with a bar."""
+    if ray is not None:
+        import functools
+        import uuid
+
+        from stability.batch import RayExecutor
+
+        task = functools.partial(_with_init, uuid.uuid4().hex, init, initargs, fn)
+        out: dict[int, Any] = {}
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(jobs), desc=f"{desc} (ray)", unit="dir")
+        with RayExecutor(ray, num_cpus=workers if workers > 1 else None) as ex:
+            for k, outcome in ex.run(task, enumerate(jobs)):
+                if outcome.status != "ok":
+                    raise MapError(f"direction {k}: {outcome.status}: {outcome.message}")
+                out[k] = outcome.value
+                if bar is not None:
+                    bar.update()
+        if bar is not None:
+            bar.close()
+        return [out[k] for k in range(len(jobs))]
     pool = None
     if workers == 1:
         init(*initargs)
@@ -355,6 +441,7 @@ def run(
     methods: Sequence[str] = ("sim",),
     seat: ArrayLike | None = None,
     frame: str = "world",
+    ray: str | None = None,
     **options: Any,
 ) -> tuple[Path, Path, list[float], list[tuple[str, str, dict[str, float]]]]:
     """The CLI's work: one map per method and preload, CSV + PNG; returns their paths, the
@@ -367,13 +454,13 @@ def run(
             if method == "sim":
                 rm = simulated_map(
                     scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable,
-                    seat=seat, frame=frame, cap=cap, workers=workers, progress=progress,
+                    seat=seat, frame=frame, cap=cap, workers=workers, progress=progress, ray=ray,
                 )  # fmt: skip
             else:
                 rm = analysis_map(
                     scene, plane, directions, method=method, preload=pre,
                     nonbackdrivable=nonbackdrivable, seat=seat, frame=frame, cap=cap,
-                    workers=workers,
+                    workers=workers, ray=ray,
                     progress=progress, **options,
                 )  # fmt: skip
             walls.append(time.perf_counter() - t)
