@@ -141,7 +141,12 @@ class LocalExecutor(Executor):
                         (key, payload), tries = nxt, 0
                     else:
                         continue
-                    pool[slot][1].send((key, payload))
+                    try:
+                        pool[slot][1].send((key, payload))
+                    except (BrokenPipeError, OSError):  # it died while idle: a fresh one
+                        pool[slot][0].join(timeout=1.0)
+                        pool[slot] = self._spawn(fn)
+                        pool[slot][1].send((key, payload))
                     busy[slot] = (key, payload, tries, time.monotonic())
                 if not busy:
                     return

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..api import solve
+from ..api import RENAMED_METHODS, available_methods, solve
 from .executors import BatchError, Executor, LocalExecutor
 from .rows import RowError, decode_row, failed_row, read_rows, result_row
 
@@ -81,6 +81,8 @@ def run_batch(
     Returns counts: ``total`` rows, ``skipped`` (already in ``out``), ``done`` (answered
     now), ``invalid``, and one count per status."""
     queries, out = Path(queries), Path(out)
+    if method is not None and method not in available_methods() + list(RENAMED_METHODS):
+        raise BatchError(f"unknown method {method!r}; registered: {available_methods()}")
     if not queries.is_file():
         raise BatchError(f"no query file {queries}")
     if out.resolve() == queries.resolve():

@@ -277,6 +277,8 @@ def test_map_rows_answer_what_resistible_forces_answers(tmp_path: Path) -> None:
 def test_bad_options_are_our_errors(tmp_path: Path) -> None:
     with pytest.raises(BatchError, match="workers"):
         LocalExecutor(0)
+    with pytest.raises(BatchError, match="unknown method 'magic'"):
+        run_batch(tmp_path / "q.jsonl", tmp_path / "r.jsonl", method="magic", progress=False)
     with pytest.raises(BatchError, match="no query file"):
         run_batch(tmp_path / "missing.jsonl", tmp_path / "r.jsonl", progress=False)
     with pytest.raises(GraspError, match="query must be"):
