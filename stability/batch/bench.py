@@ -6,9 +6,10 @@ process (a plain loop over :func:`stability.solve`, the reference), with 1 and 2
 worker processes, and with Ray on a local cluster of 2 CPUs; median of ``--repeats`` runs,
 each with a fresh result file. Ray's own cost: the start of a local cluster, and the
 overhead of each executor: ``--noop`` and twice as many tasks that do nothing give the cost
-per task (the difference over the extra tasks) and the fixed cost of a run (process starts). Writes
-``OUT/batch_bench.csv``, ``OUT/batch_overhead.csv`` and ``OUT/batch_bench.png``, and an
-estimate of the cores needed to label 1M grasps in a day from the measured cost per query.
+per task (the difference over the extra tasks) and the fixed cost of a run (process
+starts). Writes ``OUT/batch_bench.csv``, ``OUT/batch_overhead.csv`` and
+``OUT/batch_bench.png``, and an estimate of the cores needed to label 1M grasps in a day from
+the measured cost per query.
 """
 
 from __future__ import annotations
@@ -145,6 +146,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             tasks=0,
             wall_s=ray_start,
             ms_per_task=float("nan"),
+            fixed_s=ray_start,
         )
     )
     a.out.mkdir(parents=True, exist_ok=True)
@@ -155,7 +157,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         cores = 1e6 * t / 86400.0
         print(
             f"{name}: median {t * 1e3:.1f} ms per query in one process -> 1M queries in a day "
-            f"need about {cores:.1f} cores at full use (an estimate: no overhead, "
+            f"need about {cores:.2g} cores at full use (an estimate: no overhead, "
             "same query mix)"
         )
     print(f"wrote {a.out}/batch_bench.csv, batch_overhead.csv, batch_bench.png")
