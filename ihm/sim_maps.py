@@ -184,12 +184,7 @@ def simulated_map(
 
 def _init_analysis(grasp: Any, commands: np.ndarray, com: np.ndarray, method: str,
                    options: dict[str, Any]) -> None:  # fmt: skip
-    from stability import Grasp
-
-    rigid = Grasp(points=grasp.points, normals=grasp.normals, mu=grasp.mu)
-    if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
-        commands = grasp.full_commands(commands)
-    _STATE.update(grasp=grasp, rigid=rigid, commands=commands, com=com, method=method,
+    _STATE.update(grasp=grasp, rigid=_rigid(grasp), commands=commands, com=com, method=method,
                   options=options)  # fmt: skip
 
 
@@ -269,7 +264,8 @@ def _settled_grasp(
     gravity: bool,
 ) -> tuple[Any, np.ndarray, np.ndarray]:
     """The settled scene's grasp (:class:`ihm.contacts.SceneGrasp`), the commands it was
-    settled with and the object's centre of mass in the object frame."""
+    settled with (one per column of its ``R``: ``SceneGrasp.full_commands``) and the object's
+    centre of mass in the object frame."""
     from .contacts import grasp_from_mujoco
 
     model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
@@ -277,7 +273,17 @@ def _settled_grasp(
     if scenes.last_ratchet is not None:
         scenes.last_ratchet.release()
     commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
-    return grasp_from_mujoco(model, data), commands, model.body_ipos[model.body("object").id].copy()
+    grasp = grasp_from_mujoco(model, data)
+    if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
+        commands = grasp.full_commands(commands)
+    return grasp, commands, model.body_ipos[model.body("object").id].copy()
+
+
+def _rigid(grasp: Any) -> Any:
+    """The grasp's contacts alone (no hand): what the rigid-hand method ``gws`` answers."""
+    from stability import Grasp
+
+    return Grasp(points=grasp.points, normals=grasp.normals, mu=grasp.mu)
 
 
 def scene_map_rows(
@@ -299,19 +305,15 @@ def scene_map_rows(
     centre of mass, its weight as base load, the settled commands (``gws``: the rigid grasp,
     no commands). Ids ``"<scene>-<plane>-<k>"``. ``python -m stability.batch`` on them gives
     the map's values (tested)."""
-    from stability import Grasp
     from stability.batch import map_rows
 
     check_options(plane, method, directions, 1, cap, frame)
     if method == "sim":
         raise MapError("batch rows take a stability method, not 'sim'")
     g, commands, com = _settled_grasp(scene, preload, nonbackdrivable, seat, gravity)
-    rigid = method == "gws"
-    grasp = Grasp(points=g.points, normals=g.normals, mu=g.mu) if rigid else g
-    full = None if rigid else (g.full_commands(commands) if hasattr(g, "full_commands")
-                               else commands)  # fmt: skip
-    return map_rows(grasp, plane=plane, directions=directions, cap=cap, base=g.gravity_wrench,
-                    commands=full, torque_point=com,
+    rigid = method == "gws"  # a rigid-hand method: the contacts only, no commands
+    return map_rows(_rigid(g) if rigid else g, plane=plane, directions=directions, cap=cap,
+                    base=g.gravity_wrench, commands=None if rigid else commands, torque_point=com,
                     rotation=None if frame == "object" else g.object_mat,
                     id_prefix=f"{scene}-{plane}", method=method, options=options)  # fmt: skip
 
@@ -330,47 +332,44 @@ def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, pro
     """``fn`` over ``jobs`` in this process (``workers`` 1), a local pool, or as Ray tasks on
     the cluster at ``ray`` (:class:`stability.batch.RayExecutor`; ``workers`` then sizes a new
     local cluster), in order, with a bar."""
+    closer: Any = None
     if ray is not None:
         import functools
         import uuid
 
         from stability.batch import RayExecutor
 
+        closer = RayExecutor(ray, num_cpus=workers if workers > 1 else None)
         task = functools.partial(_with_init, uuid.uuid4().hex, init, initargs, fn)
-        out: dict[int, Any] = {}
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=len(jobs), desc=f"{desc} (ray)", unit="dir")
-        with RayExecutor(ray, num_cpus=workers if workers > 1 else None) as ex:
-            for k, outcome in ex.run(task, enumerate(jobs)):
-                if outcome.status != "ok":
-                    raise MapError(f"direction {k}: {outcome.status}: {outcome.message}")
-                out[k] = outcome.value
-                if bar is not None:
-                    bar.update()
-        if bar is not None:
-            bar.close()
-        return [out[k] for k in range(len(jobs))]
-    pool = None
-    if workers == 1:
+        it: Any = _ray_values(closer.run(task, enumerate(jobs)))
+        desc += " (ray)"
+    elif workers == 1:
         init(*initargs)
-        it: Any = map(fn, jobs)
+        it = enumerate(map(fn, jobs))
     else:
         start = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        pool = mp.get_context(start).Pool(workers, initializer=init, initargs=initargs)
-        it = pool.imap(fn, jobs)
+        closer = mp.get_context(start).Pool(workers, initializer=init, initargs=initargs)
+        it = enumerate(closer.imap(fn, jobs))
     if progress:
         from tqdm import tqdm
 
         it = tqdm(it, total=len(jobs), desc=desc, unit="dir")
     try:
-        return list(it)
+        out = dict(it)  # job index -> result (Ray's arrive in completion order)
+        return [out[k] for k in range(len(jobs))]
     finally:
-        if pool is not None:
-            pool.close()
-            pool.join()
+        if closer is not None:
+            closer.close()
+            if ray is None:
+                closer.join()
+
+
+def _ray_values(outcomes: Any) -> Any:
+    """``(k, value)`` per Ray outcome; :class:`MapError` for a direction that failed."""
+    for k, outcome in outcomes:
+        if outcome.status != "ok":
+            raise MapError(f"direction {k}: {outcome.status}: {outcome.message}")
+        yield k, outcome.value
 
 
 def agreement(pred: ResistibleMap, sim: ResistibleMap) -> dict[str, float]:

@@ -300,14 +300,19 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         o[ff.NQ : 2 * ff.NU] = d.ctrl
         if self.scaler is not None and self.scaler.current.latency:
             # the controller knows what it sent: the setpoint of the action still in flight
-            ph = self.physics
-            cmd = d.ctrl + self._prev_action * self.max_setpoint_step
-            o[ff.NQ : 2 * ff.NU] = np.minimum(np.maximum(cmd, ph.ctrl_lo), ph.ctrl_hi)
+            self._setpoints_after(self._prev_action, o[ff.NQ : 2 * ff.NU])
         pos, fn, _ = self.physics.link_contacts()
         c = o[2 * ff.NU :].reshape(len(CONTACT_LINKS), 4)
         c[:, :3] = pos
         c[:, 3] = fn
         return np.minimum(np.maximum(o, self._lo), self._hi)
+
+    def _setpoints_after(self, a: NDArray[np.float64], out: NDArray[Any]) -> None:
+        """``out[:] = clip(data.ctrl + a * max_setpoint_step)`` to the servos' ctrlrange: the
+        setpoints that action ``a`` commands."""
+        ph = self.physics
+        ctrl = self.data.ctrl + a * self.max_setpoint_step
+        np.minimum(np.maximum(ctrl, ph.ctrl_lo, out=ctrl), ph.ctrl_hi, out=out)
 
     def _sensed(self) -> NDArray[np.float32]:
         """The observation with the episode's sensor noise (none without randomisation)."""
@@ -364,8 +369,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if self.scaler is not None and self.scaler.current.latency:
             a, self._prev_action = self._prev_action, a  # one policy step late
         d, ph = self.data, self.physics
-        ctrl = d.ctrl + a * self.max_setpoint_step
-        np.minimum(np.maximum(ctrl, ph.ctrl_lo, out=ctrl), ph.ctrl_hi, out=d.ctrl)
+        self._setpoints_after(a, d.ctrl)
         self._quat[:] = ph.object_quat()
         mujoco.mj_step(self.model, d, nstep=self.frame_skip)
         rate = self._yaw_rate(self._quat)

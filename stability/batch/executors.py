@@ -118,6 +118,19 @@ class LocalExecutor(Executor):
         child.close()
         return proc, parent
 
+    def _replace(
+        self, pool: list[tuple[Any, Connection]], slot: int, fn: Callable[[Any], Any], kill: bool
+    ) -> int | None:
+        """A fresh worker in ``pool[slot]`` (the old one killed first when ``kill``, then
+        reaped and its pipe closed); returns the old one's exit code."""
+        proc, conn = pool[slot]
+        if kill:
+            proc.kill()
+        proc.join(timeout=5.0 if kill else 1.0)
+        conn.close()
+        pool[slot] = self._spawn(fn)
+        return proc.exitcode
+
     def run(
         self, fn: Callable[[Any], Any], tasks: Iterable[tuple[Any, Any]]
     ) -> Iterator[tuple[Any, Outcome]]:
@@ -144,8 +157,7 @@ class LocalExecutor(Executor):
                     try:
                         pool[slot][1].send((key, payload))
                     except (BrokenPipeError, OSError):  # it died while idle: a fresh one
-                        pool[slot][0].join(timeout=1.0)
-                        pool[slot] = self._spawn(fn)
+                        self._replace(pool, slot, fn, kill=False)
                         pool[slot][1].send((key, payload))
                     busy[slot] = (key, payload, tries, time.monotonic())
                 if not busy:
@@ -161,35 +173,27 @@ class LocalExecutor(Executor):
                     slot = handles[h]
                     if slot in done:
                         continue
-                    key, payload, tries, _ = busy[slot]
-                    proc, conn = pool[slot]
+                    done.add(slot)
+                    key, payload, tries, _ = busy.pop(slot)
+                    conn = pool[slot][1]
                     try:
                         if h is not conn or not conn.poll():
                             raise EOFError
                         got_key, outcome = conn.recv()
                     except (EOFError, OSError):  # the worker died holding this task
-                        done.add(slot)
-                        del busy[slot]
-                        proc.join(timeout=1.0)
-                        code = proc.exitcode
-                        pool[slot] = self._spawn(fn)
+                        code = self._replace(pool, slot, fn, kill=False)
                         if tries < self.retries:
                             retry.append((key, payload, tries + 1))
                         else:
                             msg = f"its worker died on all {tries + 1} attempts (exit code {code})"
                             yield key, Outcome("crashed", message=msg)
                         continue
-                    done.add(slot)
-                    del busy[slot]
                     yield got_key, outcome
                 if self.hard_timeout is not None:
                     now = time.monotonic()
                     for slot, (key, _, _, t0) in list(busy.items()):
                         if now - t0 >= self.hard_timeout:
-                            proc, _ = pool[slot]
-                            proc.kill()
-                            proc.join(timeout=5.0)
-                            pool[slot] = self._spawn(fn)
+                            self._replace(pool, slot, fn, kill=True)
                             del busy[slot]
                             msg = f"ran past the hard time limit of {self.hard_timeout:g} s"
                             yield key, Outcome("killed", message=msg)
