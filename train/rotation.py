@@ -47,7 +47,15 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
-from envs.four_finger import FRAME_SKIP, OBJECTS, TIMESTEP, Randomization, grasp_cache
+from envs.four_finger import (
+    FRAME_SKIP,
+    OBJECTS,
+    TIMESTEP,
+    PhysicsSample,
+    Randomization,
+    corners,
+    grasp_cache,
+)
 from shields import GraspShield
 from shields.qp import BACKENDS
 from stability.io import write_csv
@@ -171,6 +179,16 @@ class RotateConfig:
         "randomised physics in the training envs (envs.four_finger.Randomization: friction, "
         "torsional friction, mass, servo gains, latency, sensor noise); evaluations stay nominal",
     )
+    corner_prob: float = opt(
+        0.0,
+        "with --randomize: probability that a training episode's physics is one of the 16 "
+        "corners of the ranges (envs.four_finger.corners) instead of a uniform draw",
+    )
+    validate_corners: int = opt(
+        0,
+        "with --randomize: also validate at each of the 16 corners, N episodes each; best/ is "
+        "then chosen on the worse of the nominal and the pooled corner figures",
+    )
     lr_schedule: str = opt(
         "linear",
         "learning rate: constant, or linear decay to 0 over --total-steps",
@@ -188,6 +206,12 @@ class RotateConfig:
     threads: int = opt(2, "torch threads for the PPO update")
     out: str = opt("runs", "directory that receives the run directory")
     resume: str | None = opt(None, "run directory to continue")
+    init_from: str | None = opt(
+        None,
+        "run or policy directory whose policy and value weights and observation statistics "
+        "start this new run (transfer: e.g. a sphere policy starts a cube run); its nets must "
+        "match --pi and --vf",
+    )
     progress: bool = opt(True, "show a tqdm progress bar")
     verbose: int = opt(0, "SB3 verbosity")
 
@@ -210,8 +234,20 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         problems.append(
             "--eval-episodes and --workers must be >= 0, --checkpoint-every and --threads >= 1"
         )
+    if not 0.0 <= cfg.corner_prob <= 1.0 or cfg.validate_corners < 0:
+        problems.append("--corner-prob must be in [0, 1] and --validate-corners >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
+    if cfg.init_from is not None:
+        src = policy_dir(Path(cfg.init_from))
+        if cfg.resume is not None:
+            problems.append("--init-from starts a new run; it cannot be given with --resume")
+        elif not (src / "vecnormalize.pkl").is_file() or not any(
+            (src / f).is_file() for f in ("policy.pt", "model.zip")
+        ):
+            problems.append(
+                f"--init-from {cfg.init_from}: no policy.pt or model.zip with vecnormalize.pkl"
+            )
     try:
         env_physics(cfg.timestep)
     except ValueError as e:
@@ -237,10 +273,12 @@ def make_env(
     append: bool = False,
     max_steps: int | None = None,
     train: bool = True,
+    physics: PhysicsSample | None = None,
 ) -> Callable[[], gym.Env]:
     """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
     ``cfg.episode_steps``) -> :class:`shields.GraspShield` with ``--shield qp`` -> Monitor
-    when ``monitor_file`` is given; seeded with ``seeds``."""
+    when ``monitor_file`` is given; seeded with ``seeds``. Training envs (``train``) of a
+    ``--randomize`` run draw their physics per episode; ``physics`` fixes it instead."""
 
     def thunk() -> gym.Env:
         env = gym.make(
@@ -252,7 +290,8 @@ def make_env(
             drop_weight=cfg.drop_weight,
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
-            randomize=Randomization() if cfg.randomize and train else None,
+            randomize=training_randomization(cfg) if train and physics is None else None,
+            physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
         if cfg.shield == "qp":
@@ -267,6 +306,12 @@ def make_env(
         return env
 
     return thunk
+
+
+def training_randomization(cfg: RotateConfig) -> Randomization | None:
+    """The training envs' randomised physics: the env's :class:`Randomization` with
+    ``cfg.corner_prob``, or ``None`` without ``--randomize``."""
+    return Randomization(corner_prob=cfg.corner_prob) if cfg.randomize else None
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
@@ -313,10 +358,16 @@ class EvalCallback(BaseCallback):
     vecnormalize.pkl, config.json, eval.json with its validation result)."""
 
     def __init__(
-        self, cfg: RotateConfig, run_dir: Path, eval_envs: Sequence[gym.Env], every: int
+        self,
+        cfg: RotateConfig,
+        run_dir: Path,
+        eval_envs: Sequence[gym.Env],
+        every: int,
+        corner_envs: Sequence[gym.Env] = (),
     ) -> None:
         super().__init__()
         self.cfg, self.run_dir, self.eval_envs, self.every = cfg, run_dir, eval_envs, every
+        self.corner_envs = corner_envs
         self.t0 = time.perf_counter()
         self.next = 0
         best = run_dir / "best" / "eval.json"
@@ -338,32 +389,70 @@ class EvalCallback(BaseCallback):
     def evaluate(self) -> dict[str, float]:
         norm = normalizer(self.model.get_env())
         res = evaluate_rotation(self.model, self.eval_envs, self.cfg.eval_episodes, norm)
-        row = {
+        row: dict[str, Any] = {
             "steps": int(self.num_timesteps),
             "speed_rad_s": round(res["speed_rad_s"], 4),
             "drop_rate": round(res["drop_rate"], 4),
             "episodes": res["episodes"],
             "wall_s": round(time.perf_counter() - self.t0, 1),
         }
+        rank = res
+        if self.corner_envs:  # the corners, pooled; best/ on the worse of the two
+            n = len(self.corner_envs) * self.cfg.validate_corners
+            cor = evaluate_rotation(self.model, self.corner_envs, n, norm)
+            row.update(
+                corner_speed_rad_s=round(cor["speed_rad_s"], 4),
+                corner_drop_rate=round(cor["drop_rate"], 4),
+                corner_episodes=cor["episodes"],
+            )
+            rank = {
+                "speed_rad_s": min(res["speed_rad_s"], cor["speed_rad_s"]),
+                "drop_rate": max(res["drop_rate"], cor["drop_rate"]),
+            }
+            res = {**res, "corners": cor}
         path = self.run_dir / "eval.csv"
         rows = []
         if path.is_file():  # a resumed run goes on with its rows
             with path.open(newline="") as f:
                 rows = list(csv.DictReader(f))
-        write_csv(path, [*rows, row], columns=list(row))
+        write_csv(
+            path, [*rows, row], columns=list(dict.fromkeys([*row, *rows[0]] if rows else row))
+        )
         self.logger.record("eval/speed_rad_s", res["speed_rad_s"])
         self.logger.record("eval/drop_rate", res["drop_rate"])
         plot_curve(self.run_dir)
         if self.cfg.keep_best and (
-            self.best is None or validation_key(res) > validation_key(self.best)
+            self.best is None
+            or validation_key(rank) > validation_key(self.best.get("ranked_on", self.best))
         ):
-            self.best = {**row, "validation_episodes": res["episodes"]}
+            self.best = {
+                **row,
+                "validation_episodes": res["episodes"],
+                "ranked_on": {k: round(rank[k], 4) for k in ("speed_rad_s", "drop_rate")},
+            }
             best = self.run_dir / "best"
             best.mkdir(exist_ok=True)
             checkpoint(self.model, best)
             shutil.copy(self.run_dir / "config.json", best / "config.json")
             (best / "eval.json").write_text(json.dumps(self.best, indent=2) + "\n")
         return res
+
+
+def init_weights(model: PPO, source: Path) -> None:
+    """Copy the policy and value weights (and the policy's log std) of the run or policy
+    directory ``source`` (:func:`policy_dir`: its ``best/`` when it kept one) into ``model``;
+    ValueError naming the mismatch when the nets differ."""
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    src = policy_dir(Path(source))
+    if (src / "policy.pt").is_file():
+        policy = ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
+    else:
+        policy = PPO.load(src / "model.zip", device="cpu").policy
+    try:
+        model.policy.load_state_dict(policy.state_dict())
+    except RuntimeError as e:
+        raise ValueError(f"--init-from {source}: its nets do not match --pi/--vf ({e})") from e
 
 
 def checkpoint(model: PPO, run_dir: Path) -> None:
@@ -488,6 +577,29 @@ def _start_randomizing(cfg: RotateConfig, run_dir: Path, done: int) -> RotateCon
     return cfg
 
 
+FINETUNE = ("corner_prob", "validate_corners", "checkpoint_every", "eval_episodes")
+"""Fields that ``--resume`` takes from the command line when given there (a fine-tune may
+change them); every other saved field decides."""
+
+
+def _given(argv: Sequence[str], field: str) -> bool:
+    flag = "--" + field.replace("_", "-")
+    return any(a == flag or a.startswith(flag + "=") for a in argv)
+
+
+def _start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
+    """Record fine-tune options given with ``--resume`` in config.json (with
+    ``finetune_from_step``); when corner validation starts, the earlier ``best/`` (chosen on
+    other figures) moves to ``best_previous/``."""
+    saved = json.loads((run_dir / "config.json").read_text())
+    starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
+    saved.update(changed, finetune_from_step=done)
+    (run_dir / "config.json").write_text(json.dumps(saved, indent=2) + "\n")
+    if starts_corners and (run_dir / "best").is_dir():
+        shutil.rmtree(run_dir / "best_previous", ignore_errors=True)
+        (run_dir / "best").rename(run_dir / "best_previous")
+
+
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume), evaluate, save; returns the final evaluation."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -496,6 +608,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
     name = f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
     keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
+    if cfg.resume is not None:
+        keep += tuple(f for f in FINETUNE if _given(argv, f))
     cfg, run_dir = open_run(cfg, name, keep=keep)
     grasp_cache(
         cfg.object, cfg.gravity, **env_physics(cfg.timestep)
@@ -503,6 +617,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
     if cfg.resume is not None and "--randomize" in argv and not cfg.randomize:
         cfg = _start_randomizing(cfg, run_dir, done)
+    changed = {f: getattr(cfg, f) for f in FINETUNE if cfg.resume is not None and _given(argv, f)}
+    if changed:
+        _start_finetune(run_dir, changed, done)
     seeds = RunSeeds(cfg.seed, segment=done)
     seed_everything(seeds.global_seed)
     mon = run_dir / "monitor"
@@ -515,6 +632,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     stats = run_dir / "vecnormalize.pkl"
     if cfg.resume is not None and stats.is_file():
         vec = VecNormalize.load(str(stats), vec)
+    elif cfg.init_from is not None:  # the source's statistics go on updating
+        vec = VecNormalize.load(str(policy_dir(Path(cfg.init_from)) / "vecnormalize.pkl"), vec)
+        vec.training = True
     else:
         vec = VecNormalize(vec, gamma=cfg.gamma)
     max_eval = int(round(cfg.eval_seconds * 20))
@@ -523,12 +643,27 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         make_env(cfg, s, max_steps=max_eval, train=False)()
         for s in seeds.envs("validation", n_eval)
     ]
+    corner_envs = []
+    if cfg.randomize and cfg.validate_corners:
+        cases = corners(training_randomization(cfg))
+        corner_envs = [
+            make_env(cfg, s, max_steps=max_eval, train=False, physics=c)()
+            for s, c in zip(
+                seeds.envs("validation", n_eval + len(cases))[n_eval:], cases, strict=True
+            )
+        ]
     if cfg.resume is not None:
         model = PipelinedPPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
     else:
         model = build_model(cfg, vec)
+        if cfg.init_from is not None:
+            try:
+                init_weights(model, Path(cfg.init_from))
+            except ValueError as e:
+                vec.close()
+                raise SystemExit(f"python -m train.ppo: error: {e}") from None
     model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
-    ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every)
+    ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every, corner_envs)
     callbacks: list[BaseCallback] = [ev]
     if cfg.workers:
         callbacks.append(RolloutThreads(cfg.threads))
@@ -551,7 +686,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     plot_curve(run_dir)
     vec.close()
-    for env in eval_envs:
+    for env in [*eval_envs, *corner_envs]:
         env.close()
     print(
         f"{run_dir}: {result['num_timesteps']} steps in {train_s:.0f} s "

@@ -13,10 +13,14 @@ episode (at ``reset``) and :class:`ModelScaler` writes it into the ``MjModel``:
 | sensor noise, Gaussian | joints, contact positions, normal forces | 0.005 rad, 1 mm, 0.05 N |
 
 Scales are drawn uniformly between the bounds (mass log-uniformly, so that x0.5 and x2 are
-equally likely). The servo's torque limit (``forcerange`` 0.5 N m) is the motor's and is not
-scaled. Setpoints (``data.ctrl``) are the controller's own numbers and are not noisy; contact
-slots of a link that touches nothing stay zero. ``mj_setConst`` is run after every change so
-that the model's derived constants (``body_subtreemass``, ``dof_invweight0``) follow.
+equally likely). With ``corner_prob`` > 0, an episode is instead, with that probability, one
+of the :func:`corners` drawn uniformly (boundary sampling: the bounds, where a policy fails
+first, are drawn more often than a uniform draw would).
+
+The servo's torque limit (``forcerange`` 0.5 N m) is the motor's and is not scaled.
+Setpoints (``data.ctrl``) are the controller's own numbers and are not noisy; contact slots
+of a link that touches nothing stay zero. ``mj_setConst`` is run after every change so that
+the model's derived constants (``body_subtreemass``, ``dof_invweight0``) follow.
 
 :func:`corners` lists the ``2^4`` combinations of the bounds of friction, torsional friction,
 mass and gain, each with latency and noise at their maxima: the robustness table's cases.
@@ -48,6 +52,7 @@ class Randomization:
     noise_joint: float = 0.005  # [rad] std of joint position noise
     noise_pos: float = 0.001  # [m] std of contact position noise
     noise_force: float = 0.05  # [N] std of normal force noise
+    corner_prob: float = 0.0  # probability that an episode is one of the corners()
 
     def __post_init__(self) -> None:
         for name in ("friction", "torsional", "mass", "gain"):
@@ -56,15 +61,21 @@ class Randomization:
                 raise FourFingerError(
                     f"randomization {name} range must be 0 < low <= high, got {(lo, hi)}"
                 )
-        if not 0.0 <= self.latency_prob <= 1.0:
-            raise FourFingerError(f"latency_prob must be in [0, 1], got {self.latency_prob}")
+        for name in ("latency_prob", "corner_prob"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise FourFingerError(f"{name} must be in [0, 1], got {v}")
         for name in ("noise_joint", "noise_pos", "noise_force"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v}")
 
     def sample(self, rng: np.random.Generator, nu: int) -> PhysicsSample:
-        """One episode's physics."""
+        """One episode's physics: with probability ``corner_prob`` one of :func:`corners`
+        (each equally likely), else the uniform draw of the module doc."""
+        if self.corner_prob > 0 and rng.uniform() < self.corner_prob:
+            cs = corners(self)
+            return cs[int(rng.integers(len(cs)))]
         lo, hi = np.log(self.mass)
         return PhysicsSample(
             friction=float(rng.uniform(*self.friction)),

@@ -238,6 +238,35 @@ def test_corners_cover_the_ranges() -> None:
         FourFingerRotate(randomize=Randomization(), physics=PhysicsSample())
 
 
+def test_corner_prob_draws_corners_at_the_stated_rate() -> None:
+    """Boundary sampling: ``corner_prob`` 1 draws only corners, all 16 of them; 0.5 about half
+    (binomial, 400 draws, 4.5 sigma); 0 leaves the uniform stream as it was; out of [0, 1]
+    is refused. In the env, a corner episode's friction is read back from the model."""
+    cs = set(corners())
+    rng = np.random.default_rng(0)
+    draws = [Randomization(corner_prob=1.0).sample(rng, ff.NU) for _ in range(200)]
+    assert set(draws) <= cs and len(set(draws)) == 16
+    rng = np.random.default_rng(1)
+    half = [Randomization(corner_prob=0.5).sample(rng, ff.NU) in cs for _ in range(400)]
+    assert abs(sum(half) - 200) < 4.5 * math.sqrt(100)
+    a = [Randomization().sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
+    b = [Randomization(corner_prob=0.0).sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
+    assert a == b and not set(a) & cs
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(FourFingerError, match="corner_prob"):
+            Randomization(corner_prob=bad)
+    env = FourFingerRotate(randomize=Randomization(corner_prob=1.0))
+    m0 = FourFingerRotate().model
+    p = env.scaler.obj_pairs
+    for k in range(4):
+        env.reset(seed=k)
+        s = env.scaler.current
+        assert s in cs
+        np.testing.assert_allclose(
+            env.model.pair_friction[p, 0], s.friction * m0.pair_friction[p, 0]
+        )
+
+
 def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
     """``height = -w * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` of the object's centre after the
     step: 0 for a grasp held high, -w/2 halfway down, and part of the reward."""

@@ -122,3 +122,59 @@ def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> No
     res = json.loads((run_dir / "eval.json").read_text())
     assert res["num_timesteps"] == 2048 and res["episodes"] == 2
     assert np.isfinite(res["speed_rad_s"]) and np.isfinite(res["summed_rad_s"])
+
+
+def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> None:
+    """``--resume RUN --randomize --corner-prob P --validate-corners N``: config.json records
+    the fine-tune, eval.csv gains the pooled corner figures (16 corners x N episodes), the
+    earlier ``best/`` moves aside (``best_nominal/``) and the new ``best/`` is ranked on the
+    worse of nominal and corners. ``--init-from RUN --object cube`` starts a new run from the
+    run's weights (equal before training); nets that do not match are refused by name."""
+    import torch
+    from stable_baselines3 import PPO
+
+    tiny = [
+        "--total-steps", "128", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64",
+        "--n-epochs", "1", "--pi", "32", "32", "--vf", "32", "32", "--eval-episodes", "2",
+        "--eval-seconds", "1", "--checkpoint-every", "128", "--no-progress", "--workers", "0",
+    ]  # fmt: skip
+    p = _train_ppo(*tiny, "--out", str(tmp_path / "a"))
+    assert p.returncode == 0, p.stderr[-2000:]
+    (run_dir,) = list((tmp_path / "a").iterdir())
+    assert (run_dir / "best" / "model.zip").is_file()
+    q = _train_ppo(
+        "--resume", str(run_dir), "--randomize", "--corner-prob", "0.5", "--validate-corners",
+        "1", "--total-steps", "128", "--no-progress", "--workers", "0",
+    )  # fmt: skip
+    assert q.returncode == 0, q.stderr[-2000:]
+    cfg = json.loads((run_dir / "config.json").read_text())
+    assert cfg["randomize"] and cfg["corner_prob"] == 0.5 and cfg["validate_corners"] == 1
+    assert cfg["finetune_from_step"] == 128
+    rows = (run_dir / "eval.csv").read_text().splitlines()
+    assert "corner_drop_rate" in rows[0] and rows[-1].split(",")[-1] == "16"
+    best = json.loads((run_dir / "best" / "eval.json").read_text())
+    assert best["corner_episodes"] == 16  # the nominal run's best/ moved aside:
+    assert (run_dir / "best_nominal" / "model.zip").is_file()
+    worse = best["ranked_on"]
+    assert worse["drop_rate"] == max(best["drop_rate"], best["corner_drop_rate"])
+    assert worse["speed_rad_s"] == min(best["speed_rad_s"], best["corner_speed_rad_s"])
+
+    from train.rotation import RotateConfig, build_model, init_weights, make_env
+    from train.vec import make_vec_env
+
+    cfg_c = RotateConfig(object="cube", pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
+    vec = make_vec_env([make_env(cfg_c)], 0)
+    model = build_model(cfg_c, vec)
+    init_weights(model, run_dir)
+    src = PPO.load(run_dir / "best" / "model.zip", device="cpu").policy.state_dict()
+    for k, v in model.policy.state_dict().items():
+        assert torch.equal(v, src[k]), k
+    with pytest.raises(ValueError, match="do not match"):
+        init_weights(build_model(RotateConfig(pi=[16], vf=[16], n_steps=64), vec), run_dir)
+    vec.close()
+    r = _train_ppo(
+        *tiny, "--object", "cube", "--init-from", str(run_dir), "--out", str(tmp_path / "c")
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    (cube,) = list((tmp_path / "c").iterdir())
+    assert json.loads((cube / "config.json").read_text())["init_from"] == str(run_dir)
