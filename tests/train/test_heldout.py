@@ -27,6 +27,27 @@ def test_heldout_episodes_start_from_distinct_test_grasps() -> None:
         evaluate_heldout(zero, {}, episodes=101)
 
 
+def test_screened_start_grasps_are_the_ones_that_hold_still() -> None:
+    """Under half the friction, twice the mass and weak servos some test grasps drop with the
+    hand still. Screening (zero actions for the episode's length) and an unscreened
+    zero-action evaluation are two independent paths: the grasps the unscreened run drops
+    are exactly the ones screening skips, and from the screened ones a zero policy never
+    drops."""
+    from envs.four_finger import PhysicsSample
+
+    worst = PhysicsSample(friction=0.5, mass=2.0, gain=0.8)
+    zero = lambda obs: np.zeros((len(obs), 12), np.float32)  # noqa: E731
+    kw = {"object": "sphere"}
+    plain = evaluate_heldout(zero, kw, episodes=12, seconds=2.0, physics=worst, n_envs=4)
+    scr = evaluate_heldout(zero, kw, 12, 2.0, physics=worst, n_envs=4, screen=True)
+    assert scr["drops"] == 0 and scr["episodes"] == 12
+    held = set(scr["grasps"])
+    skipped = set(range(max(held) + 1)) - held
+    assert scr["unheld_starts"] == len(skipped) > 0
+    assert plain["drops"] == len(set(range(12)) - held) > 0
+    assert "unheld_starts" not in plain
+
+
 def test_summary_intervals() -> None:
     eps = [
         {"speed_rad_s": v, "summed_rad_s": v + 0.1, "dropped": d}
