@@ -54,7 +54,7 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
-    keys = {"object": "sphere", "gravity": True, "torsional": True}
+    keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1}
     kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
     return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
 

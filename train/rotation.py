@@ -206,6 +206,11 @@ class RotateConfig:
     threads: int = opt(2, "torch threads for the PPO update")
     out: str = opt("runs", "directory that receives the run directory")
     resume: str | None = opt(None, "run directory to continue")
+    history: int = opt(
+        1,
+        "observed frames: the actor and critic see the last N sensed observations (joints, "
+        "setpoints, contacts), oldest first; 1: the thesis' single frame",
+    )
     init_from: str | None = opt(
         None,
         "run or policy directory whose policy and value weights and observation statistics "
@@ -228,7 +233,15 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
     if "--thesis" in argv:
         parser.set_defaults(**THESIS)
     cfg = RotateConfig(**vars(parser.parse_args(argv)))
-    ints = ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "episode_steps")
+    ints = (
+        "total_steps",
+        "n_envs",
+        "n_steps",
+        "batch_size",
+        "n_epochs",
+        "episode_steps",
+        "history",
+    )
     problems = option_problems(cfg, ints)
     if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1 or cfg.workers < 0:
         problems.append(
@@ -290,6 +303,7 @@ def make_env(
             drop_weight=cfg.drop_weight,
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
+            history=cfg.history,
             randomize=training_randomization(cfg) if train and physics is None else None,
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
@@ -438,10 +452,17 @@ class EvalCallback(BaseCallback):
         return res
 
 
+FIRST_LAYERS = ("mlp_extractor.policy_net.0.weight", "mlp_extractor.value_net.0.weight")
+
+
 def init_weights(model: PPO, source: Path) -> None:
     """Copy the policy and value weights (and the policy's log std) of the run or policy
     directory ``source`` (:func:`policy_dir`: its ``best/`` when it kept one) into ``model``;
-    ValueError naming the mismatch when the nets differ."""
+    ValueError naming the mismatch when the nets differ.
+
+    A source that saw fewer frames (``--history``) than ``model`` does is widened: the first
+    layers' weights on the older frames are zero, so the new net computes exactly what the
+    source computed from the newest frame until training uses the older ones."""
     from stable_baselines3.common.policies import ActorCriticPolicy
 
     src = policy_dir(Path(source))
@@ -449,10 +470,39 @@ def init_weights(model: PPO, source: Path) -> None:
         policy = ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
     else:
         policy = PPO.load(src / "model.zip", device="cpu").policy
+    state = policy.state_dict()
+    target = model.policy.state_dict()
+    for k in FIRST_LAYERS:
+        w, t = state.get(k), target.get(k)
+        if w is not None and t is not None and w.shape != t.shape and w.shape[0] == t.shape[0]:
+            n_src, n_new = w.shape[1], t.shape[1]
+            if n_new % n_src == 0:  # older frames first: zeros, then the source's weights
+                state[k] = torch.cat([torch.zeros(w.shape[0], n_new - n_src), w], dim=1)
     try:
-        model.policy.load_state_dict(policy.state_dict())
+        model.policy.load_state_dict(state)
     except RuntimeError as e:
-        raise ValueError(f"--init-from {source}: its nets do not match --pi/--vf ({e})") from e
+        raise ValueError(
+            f"--init-from {source}: its nets do not match --pi/--vf/--history ({e})"
+        ) from e
+
+
+def init_normalizer(vec: VecEnv, source: Path) -> VecNormalize:
+    """``VecNormalize`` over ``vec`` that starts from the observation and return statistics of
+    ``source`` (a run or policy directory), tiled over ``vec``'s frames when it observes
+    more (``--history``); the statistics go on updating."""
+    import pickle
+
+    with (policy_dir(Path(source)) / "vecnormalize.pkl").open("rb") as f:
+        old = pickle.load(f)
+    norm = VecNormalize(vec, gamma=old.gamma)
+    reps, rem = divmod(norm.obs_rms.mean.shape[0], old.obs_rms.mean.shape[0])
+    if rem:
+        raise ValueError(f"--init-from {source}: observation sizes do not match")
+    norm.obs_rms.mean = np.tile(old.obs_rms.mean, reps)
+    norm.obs_rms.var = np.tile(old.obs_rms.var, reps)
+    norm.obs_rms.count = old.obs_rms.count
+    norm.ret_rms = old.ret_rms
+    return norm
 
 
 def checkpoint(model: PPO, run_dir: Path) -> None:
@@ -577,9 +627,18 @@ def _start_randomizing(cfg: RotateConfig, run_dir: Path, done: int) -> RotateCon
     return cfg
 
 
-FINETUNE = ("corner_prob", "validate_corners", "checkpoint_every", "eval_episodes")
+FINETUNE = (
+    "corner_prob",
+    "validate_corners",
+    "rotation_cap",
+    "drop_weight",
+    "height_weight",
+    "checkpoint_every",
+    "eval_episodes",
+)
 """Fields that ``--resume`` takes from the command line when given there (a fine-tune may
-change them); every other saved field decides."""
+change them: the randomisation's sampling, the validation, the reward terms); every other
+saved field decides."""
 
 
 def _given(argv: Sequence[str], field: str) -> bool:
@@ -632,9 +691,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     stats = run_dir / "vecnormalize.pkl"
     if cfg.resume is not None and stats.is_file():
         vec = VecNormalize.load(str(stats), vec)
-    elif cfg.init_from is not None:  # the source's statistics go on updating
-        vec = VecNormalize.load(str(policy_dir(Path(cfg.init_from)) / "vecnormalize.pkl"), vec)
-        vec.training = True
+    elif cfg.init_from is not None:
+        try:
+            vec = init_normalizer(vec, Path(cfg.init_from))
+        except ValueError as e:
+            vec.close()
+            raise SystemExit(f"python -m train.ppo: error: {e}") from None
     else:
         vec = VecNormalize(vec, gamma=cfg.gamma)
     max_eval = int(round(cfg.eval_seconds * 20))

@@ -30,6 +30,11 @@ Bounds: joints ``[-pi, pi]``, setpoints the ``ctrlrange``, contact positions
 | 12-23 | commanded setpoints (``data.ctrl``) | actuators ``f1_j0 .. f4_j2`` | rad |
 | 24-55 | 8 links x (x, y, z, c_n) | geoms ``f1_proximal .. f4_distal`` | m, N |
 
+With ``history=k`` (default 1) the observation is the last ``k`` such frames, oldest first
+(``(56 k,)``; after a reset every slot holds the first frame): what a controller that keeps
+its last few readings knows, enough to sense slip and the object's response (velocities)
+that one frame does not show.
+
 Link ``k`` (0-7, order of :data:`CONTACT_LINKS`) fills ``24 + 4k .. 27 + 4k``: the
 mean position of that link's contacts with the object and the sum of their
 normal forces (the hand pushing on the object, ``c_n >= 0``; MuJoCo's elliptic
@@ -214,8 +219,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         camera: str = "side",
         solver: str = "pgs",
         torsional: bool = True,
+        history: int = 1,
     ) -> None:
         scene_name(object)
+        if not isinstance(history, (int, np.integer)) or history < 1:
+            raise FourFingerError(f"history must be an integer >= 1, got {history!r}")
         if not isinstance(gravity, (bool, np.bool_)):
             raise FourFingerError(f"gravity must be True or False, got {gravity!r}")
         for name, v in (
@@ -275,8 +283,12 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         hi = np.concatenate(
             [np.full(ff.NQ, np.pi), self.physics.ctrl_hi, np.tile([0.25, 0.25, 0.25, MAX_FORCE], 8)]
         )
-        self.observation_space = spaces.Box(lo.astype(np.float32), hi.astype(np.float32))
-        self._lo, self._hi = self.observation_space.low, self.observation_space.high
+        self._lo, self._hi = lo.astype(np.float32), hi.astype(np.float32)
+        self.history = int(history)
+        self.observation_space = spaces.Box(
+            np.tile(self._lo, self.history), np.tile(self._hi, self.history)
+        )
+        self._frames = np.zeros((self.history, N_OBS), dtype=np.float32)
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._quat = np.zeros(4)
         self._quat0 = np.zeros(4)
@@ -324,6 +336,19 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         n[2 * ff.NU :].reshape(-1, 4)[~touching] = 0.0
         return np.minimum(np.maximum(o + n, self._lo), self._hi).astype(np.float32)
 
+    def _stacked(self, frame: NDArray[np.float32], first: bool = False) -> NDArray[np.float32]:
+        """The returned observation: the last ``history`` sensed frames, oldest first (at a
+        reset every slot holds the first frame); the frame itself when ``history`` is 1."""
+        if self.history == 1:
+            return frame
+        f = self._frames
+        if first:
+            f[:] = frame
+        else:
+            f[:-1] = f[1:]
+            f[-1] = frame
+        return f.reshape(-1).copy()
+
     def _sag(self) -> float:
         """How far the object's centre sits below ``HOLD_Z``, as a fraction of the way down to
         ``DROP_Z``: ``max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` (1 at the drop threshold)."""
@@ -355,7 +380,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         mujoco.mj_forward(m, d)
         self._angle = self._twist = self._net = 0.0
         self._quat0[:] = self.physics.object_quat()
-        return self._sensed(), {"grasp": i, "rotation_angle": 0.0, "net_turn": 0.0}
+        obs = self._stacked(self._sensed(), first=True)
+        return obs, {"grasp": i, "rotation_angle": 0.0, "net_turn": 0.0}
 
     def step(
         self, action: NDArray[np.float32]
@@ -392,7 +418,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "rotation_angle": self._angle,
             "net_turn": self._net,
         }
-        return self._sensed(), reward, dropped, False, info
+        return self._stacked(self._sensed()), reward, dropped, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """An RGB frame (``height, width, 3``) from the side or top camera."""

@@ -285,3 +285,29 @@ def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
     assert info["height"] == pytest.approx(-2.0 * max(0.0, HOLD_Z - z) / (HOLD_Z - DROP_Z))
     assert info["height"] < -0.5
     assert r == pytest.approx(info["rotation"] + info["drop"] + info["action"] + info["height"])
+
+
+def test_history_stacks_the_last_frames_oldest_first() -> None:
+    """``history=3``: the observation is three sensed frames, oldest first; at a reset all
+    three are the first frame, each step shifts them by one, and the newest frame is what
+    the single-frame env observes from the same start and actions."""
+    one, three = FourFingerRotate(), FourFingerRotate(history=3)
+    n = one.observation_space.shape[0]
+    assert three.observation_space.shape == (3 * n,)
+    np.testing.assert_array_equal(three.observation_space.low[2 * n :], one.observation_space.low)
+    o1, _ = one.reset(seed=5)
+    o3, _ = three.reset(seed=5)
+    np.testing.assert_array_equal(o3.reshape(3, n), np.tile(o1, (3, 1)))
+    rng = np.random.default_rng(0)
+    frames = [o1]
+    for _ in range(4):
+        a = rng.uniform(-1, 1, 12).astype(np.float32)
+        o1 = one.step(a)[0]
+        new3 = three.step(a)[0]
+        np.testing.assert_array_equal(new3[: 2 * n], o3[n:])  # shifted by one frame
+        np.testing.assert_array_equal(new3[2 * n :], o1)
+        frames.append(o1)
+        o3 = new3
+    np.testing.assert_array_equal(o3.reshape(3, n), np.stack(frames[-3:]))
+    with pytest.raises(FourFingerError, match="history"):
+        FourFingerRotate(history=0)

@@ -172,6 +172,26 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     with pytest.raises(ValueError, match="do not match"):
         init_weights(build_model(RotateConfig(pi=[16], vf=[16], n_steps=64), vec), run_dir)
     vec.close()
+
+    # --history 3 from a one-frame source: the widened nets compute what the source computes
+    # from the newest frame, and the observation statistics are tiled over the frames
+    from train.rotation import init_normalizer
+
+    cfg_h = RotateConfig(history=3, pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
+    vec_h = init_normalizer(make_vec_env([make_env(cfg_h)], 0), run_dir)
+    model_h = build_model(cfg_h, vec_h)
+    init_weights(model_h, run_dir)
+    src_pol = PPO.load(run_dir / "best" / "model.zip", device="cpu").policy
+    x = torch.as_tensor(np.random.default_rng(0).normal(size=(5, 3 * 56)), dtype=torch.float32)
+    with torch.no_grad():
+        a_h, v_h, _ = model_h.policy.forward(x, deterministic=True)
+        a_1, v_1, _ = src_pol.forward(x[:, 2 * 56 :], deterministic=True)
+    torch.testing.assert_close(a_h, a_1)
+    torch.testing.assert_close(v_h, v_1)
+    n = vec_h.obs_rms.mean.shape[0] // 3
+    np.testing.assert_array_equal(vec_h.obs_rms.mean[:n], vec_h.obs_rms.mean[2 * n :])
+    assert n == 56
+    vec_h.close()
     r = _train_ppo(
         *tiny, "--object", "cube", "--init-from", str(run_dir), "--out", str(tmp_path / "c")
     )
