@@ -1,12 +1,14 @@
 """Compare rotation training runs: ``python -m train.compare RUN_DIR ... --out PATH``.
 
-Groups run directories of :mod:`train.rotation` (``python -m train.ppo``) by their shield
-(``config.json``: ``none`` or ``qp``) and charts, over env steps, the training episode
-return (64-step episodes, each run's moving mean over ``--window`` episodes, binned
-to a common step grid) and the periodic evaluations (deterministic policy, 20 s episodes:
-rotation speed [rad/s] and drop rate), one thin line per run and the group mean thick.
-Writes ``<out>.png`` and ``<out>.csv`` (one row per run: final evaluation, mean return
-over the last 10 % of its training episodes) and prints the table.
+Groups run directories of :mod:`train.rotation` (``python -m train.ppo``) by a field of
+their ``config.json`` (``--group-by``, default ``shield``: ``none`` or ``qp``; e.g.
+``init_from`` to set runs started from another policy beside runs from scratch, or
+``episode_steps``; a run without the field is in group ``none``) and charts, over env steps,
+the training episode return (64-step episodes, each run's moving mean over ``--window``
+episodes, binned to a common step grid) and the periodic evaluations (deterministic policy,
+20 s episodes: rotation speed [rad/s] and drop rate), one thin line per run and the group
+mean thick. Writes ``<out>.png`` and ``<out>.csv`` (one row per run: final evaluation, mean
+return over the last 10 % of its training episodes) and prints the table.
 
     python -m train.compare runs/shield_effect/* --out docs/bench/shield_training
 """
@@ -29,8 +31,9 @@ from train.rotation import monitor_returns
 __all__ = ["load_run", "main", "summarise"]
 
 
-def load_run(run_dir: Path) -> dict:
-    """One run: its shield, seed, training returns (steps, return) and evaluation rows."""
+def load_run(run_dir: Path, group_by: str = "shield") -> dict:
+    """One run: its group (``config.json[group_by]``), seed, training returns (steps,
+    return) and evaluation rows."""
     cfg_file = run_dir / "config.json"
     if not cfg_file.is_file():
         raise SystemExit(f"{run_dir}: not a training run directory (no config.json)")
@@ -43,7 +46,8 @@ def load_run(run_dir: Path) -> dict:
             evals = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
     return {
         "dir": run_dir,
-        "shield": cfg.get("shield", "none"),
+        "key": group_by,
+        "group": str(cfg.get(group_by) if cfg.get(group_by) is not None else "none"),
         "seed": int(cfg.get("seed", -1)),
         "steps": steps,
         "ret": ret,
@@ -58,7 +62,7 @@ def summarise(run: dict) -> dict[str, float | str | int]:
     last = run["evals"][-1] if run["evals"] else {}
     return {
         "run": run["dir"].name,
-        "shield": run["shield"],
+        run["key"]: run["group"],
         "seed": run["seed"],
         "env_steps": int(run["steps"][-1]) if len(run["steps"]) else 0,
         "final_return": round(float(tail.mean()), 4) if len(tail) else float("nan"),
@@ -74,14 +78,15 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    groups = sorted({r["shield"] for r in runs})
+    groups = sorted({r["group"] for r in runs})
+    key = runs[0]["key"]
     colors = {g: f"C{i}" for i, g in enumerate(groups)}
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
     top = max((r["steps"][-1] for r in runs if len(r["steps"])), default=1)
     grid = np.linspace(0, top, 60)
     for g in groups:
         curves = []
-        for r in (r for r in runs if r["shield"] == g):
+        for r in (r for r in runs if r["group"] == g):
             if len(r["ret"]) < window:
                 continue
             sm = np.convolve(r["ret"], np.ones(window) / window, mode="valid")
@@ -93,9 +98,9 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(curves, axis=0)
             ax[0].plot(grid, mean, color=colors[g], lw=2.2,
-                       label=f"shield {g} ({len(curves)} seeds)")  # fmt: skip
+                       label=f"{key} {g} ({len(curves)} runs)")  # fmt: skip
         for key, a in (("speed_rad_s", ax[1]), ("drop_rate", ax[2])):
-            rows = [r["evals"] for r in runs if r["shield"] == g and r["evals"]]
+            rows = [r["evals"] for r in runs if r["group"] == g and r["evals"]]
             for ev in rows:
                 a.plot([e["steps"] for e in ev], [e[key] for e in ev], "o-", ms=3,
                        color=colors[g], lw=0.6, alpha=0.5)  # fmt: skip
@@ -103,7 +108,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
             if n:
                 xs = np.mean([[e["steps"] for e in ev[:n]] for ev in rows], axis=0)
                 ys = np.mean([[e[key] for e in ev[:n]] for ev in rows], axis=0)
-                a.plot(xs, ys, "o-", color=colors[g], lw=2.2, label=f"shield {g}, mean")
+                a.plot(xs, ys, "o-", color=colors[g], lw=2.2, label=f"{key} {g}, mean")
     ax[0].set_title(f"training episode return (moving mean of {window})")
     ax[0].set_ylabel("return [rad/s summed over 64 steps]")
     ax[1].set_title("evaluation: rotation speed [rad/s]")
@@ -123,14 +128,15 @@ def main(argv: Sequence[str] | None = None) -> list[dict]:
     p.add_argument("runs", nargs="+", type=Path, help="run directories")
     p.add_argument("--out", type=Path, required=True, help="output path without suffix")
     p.add_argument("--window", type=int, default=100, help="episodes in the moving mean")
+    p.add_argument("--group-by", default="shield", help="config.json field that groups runs")
     args = p.parse_args(argv)
     if args.window < 1:
         p.error("--window must be >= 1")
-    runs = [load_run(d) for d in args.runs if d.is_dir()]
+    runs = [load_run(d, args.group_by) for d in args.runs if d.is_dir()]
     if not runs:
         p.error("no run directories given")
     rows = [summarise(r) for r in runs]
-    rows.sort(key=lambda r: (r["shield"], r["seed"]))
+    rows.sort(key=lambda r: (str(r[args.group_by]), r["seed"]))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_csv(args.out.with_suffix(".csv"), rows, columns=list(rows[0]))
     _plot(runs, args.out.with_suffix(".png"), args.window)

@@ -42,6 +42,22 @@ def test_summary_and_chart(tmp_path: Path) -> None:
         assert [r["shield"] for r in csv.DictReader(f)] == ["none", "qp"]
 
 
+def test_group_by_another_config_field(tmp_path: Path) -> None:
+    """``--group-by episode_steps``: runs grouped by that field, a run without it in
+    ``none``; the CSV names the field."""
+    a = fake_run(tmp_path, "a", "none", 1, [1.0] * 10)
+    b = fake_run(tmp_path, "b", "none", 2, [2.0] * 10)
+    cfg = json.loads((b / "config.json").read_text())
+    (b / "config.json").write_text(json.dumps({**cfg, "episode_steps": 200}))
+    out = tmp_path / "g"
+    rows = compare.main([str(a), str(b), "--out", str(out), "--window", "2", "--group-by",
+                         "episode_steps"])  # fmt: skip
+    assert [r["episode_steps"] for r in rows] == ["200", "none"]
+    assert rows[0]["final_return"] == pytest.approx(2.0)
+    with out.with_suffix(".csv").open() as f:
+        assert [r["episode_steps"] for r in csv.DictReader(f)] == ["200", "none"]
+
+
 def test_not_a_run_directory(tmp_path: Path) -> None:
     (tmp_path / "x").mkdir()
     with pytest.raises(SystemExit, match="not a training run"):
