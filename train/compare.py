@@ -79,7 +79,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
     import matplotlib.pyplot as plt
 
     groups = sorted({r["group"] for r in runs})
-    key = runs[0]["key"]
+    field = runs[0]["key"]
     colors = {g: f"C{i}" for i, g in enumerate(groups)}
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
     top = max((r["steps"][-1] for r in runs if len(r["steps"])), default=1)
@@ -98,7 +98,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(curves, axis=0)
             ax[0].plot(grid, mean, color=colors[g], lw=2.2,
-                       label=f"{key} {g} ({len(curves)} runs)")  # fmt: skip
+                       label=f"{field} {g} ({len(curves)} runs)")  # fmt: skip
         for key, a in (("speed_rad_s", ax[1]), ("drop_rate", ax[2])):
             rows = [r["evals"] for r in runs if r["group"] == g and r["evals"]]
             for ev in rows:
@@ -108,7 +108,7 @@ def _plot(runs: list[dict], out: Path, window: int) -> None:
             if n:
                 xs = np.mean([[e["steps"] for e in ev[:n]] for ev in rows], axis=0)
                 ys = np.mean([[e[key] for e in ev[:n]] for ev in rows], axis=0)
-                a.plot(xs, ys, "o-", color=colors[g], lw=2.2, label=f"{key} {g}, mean")
+                a.plot(xs, ys, "o-", color=colors[g], lw=2.2, label=f"{field} {g}, mean")
     ax[0].set_title(f"training episode return (moving mean of {window})")
     ax[0].set_ylabel("return [rad/s summed over 64 steps]")
     ax[1].set_title("evaluation: rotation speed [rad/s]")
