@@ -27,7 +27,6 @@ rad/s; a drop ends an episode and counts its time so far) and the drop rate
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import shutil
 import sys
@@ -61,6 +60,17 @@ from shields.qp import BACKENDS
 from stability.io import write_csv
 from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
+from train.runfiles import (
+    FINETUNE,
+    checkpoint,
+    export_policy,
+    given,
+    init_normalizer,
+    init_weights,
+    policy_dir,
+    start_finetune,
+    start_randomizing,
+)
 from train.sb3 import (
     build_parser,
     learning_rate,
@@ -95,6 +105,8 @@ __all__ = [
     "plot_curve",
     "policy_dir",
     "steps_label",
+    "training_randomization",
+    "validation_key",
 ]
 
 ENV_ID = "ihm/FourFingerRotate-v0"
@@ -452,95 +464,6 @@ class EvalCallback(BaseCallback):
         return res
 
 
-FIRST_LAYERS = ("mlp_extractor.policy_net.0.weight", "mlp_extractor.value_net.0.weight")
-
-
-def init_weights(model: PPO, source: Path) -> None:
-    """Copy the policy and value weights (and the policy's log std) of the run or policy
-    directory ``source`` (:func:`policy_dir`: its ``best/`` when it kept one) into ``model``;
-    ValueError naming the mismatch when the nets differ.
-
-    A source that saw fewer frames (``--history``) than ``model`` does is widened: the first
-    layers' weights on the older frames are zero, so the new net computes exactly what the
-    source computed from the newest frame until training uses the older ones."""
-    from stable_baselines3.common.policies import ActorCriticPolicy
-
-    src = policy_dir(Path(source))
-    if (src / "policy.pt").is_file():
-        policy = ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
-    else:
-        policy = PPO.load(src / "model.zip", device="cpu").policy
-    state = policy.state_dict()
-    target = model.policy.state_dict()
-    for k in FIRST_LAYERS:
-        w, t = state.get(k), target.get(k)
-        if w is not None and t is not None and w.shape != t.shape and w.shape[0] == t.shape[0]:
-            n_src, n_new = w.shape[1], t.shape[1]
-            if n_new % n_src == 0:  # older frames first: zeros, then the source's weights
-                state[k] = torch.cat([torch.zeros(w.shape[0], n_new - n_src), w], dim=1)
-    try:
-        model.policy.load_state_dict(state)
-    except RuntimeError as e:
-        raise ValueError(
-            f"--init-from {source}: its nets do not match --pi/--vf/--history ({e})"
-        ) from e
-
-
-def init_normalizer(vec: VecEnv, source: Path) -> VecNormalize:
-    """``VecNormalize`` over ``vec`` that starts from the observation and return statistics of
-    ``source`` (a run or policy directory), tiled over ``vec``'s frames when it observes
-    more (``--history``); the statistics go on updating."""
-    import pickle
-
-    with (policy_dir(Path(source)) / "vecnormalize.pkl").open("rb") as f:
-        old = pickle.load(f)
-    norm = VecNormalize(vec, gamma=old.gamma)
-    reps, rem = divmod(norm.obs_rms.mean.shape[0], old.obs_rms.mean.shape[0])
-    if rem:
-        raise ValueError(f"--init-from {source}: observation sizes do not match")
-    norm.obs_rms.mean = np.tile(old.obs_rms.mean, reps)
-    norm.obs_rms.var = np.tile(old.obs_rms.var, reps)
-    norm.obs_rms.count = old.obs_rms.count
-    norm.ret_rms = old.ret_rms
-    return norm
-
-
-def checkpoint(model: PPO, run_dir: Path) -> None:
-    """Save model.zip and vecnormalize.pkl (written to a temporary name, then renamed)."""
-    tmp = run_dir / "model.tmp.zip"
-    model.save(tmp)
-    tmp.replace(run_dir / "model.zip")
-    env = model.get_env()
-    if isinstance(env, VecNormalize):
-        env.save(str(run_dir / "vecnormalize.tmp.pkl"))
-        (run_dir / "vecnormalize.tmp.pkl").replace(run_dir / "vecnormalize.pkl")
-
-
-def policy_dir(run_dir: Path) -> Path:
-    """The directory of a run's policy: ``run_dir/best`` when the run kept its best validated
-    checkpoint there (:class:`EvalCallback`), else ``run_dir``."""
-    best = Path(run_dir) / "best"
-    return best if (best / "model.zip").is_file() else Path(run_dir)
-
-
-def export_policy(run_dir: Path, dest: Path) -> Path:
-    """Copy a run's policy (weights only, ``ActorCriticPolicy.save``: no optimiser state) with
-    its ``vecnormalize.pkl`` (:func:`policy_dir`: from ``best/`` when the run kept one, else the
-    final model), and the run's ``config.json``, ``eval.json``, ``eval.csv`` and ``curve.png``
-    to ``dest``: what ``python -m train.gait`` and replaying need, a quarter of ``model.zip``'s
-    size. ``dest/best.json`` names the checkpoint exported."""
-    src = policy_dir(run_dir)
-    dest.mkdir(parents=True, exist_ok=True)
-    PPO.load(src / "model.zip", device="cpu").policy.save(str(dest / "policy.pt"))
-    shutil.copy(src / "vecnormalize.pkl", dest / "vecnormalize.pkl")
-    for f in ("config.json", "eval.json", "eval.csv", "curve.png"):
-        if (run_dir / f).is_file():
-            shutil.copy(run_dir / f, dest / f)
-    if src != run_dir:
-        shutil.copy(src / "eval.json", dest / "best.json")
-    return dest
-
-
 def monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """(cumulative env steps at each episode end, episode return) over all monitor files, in
     wall-time order."""
@@ -612,53 +535,6 @@ def plot_curve(run_dir: Path, out: Path | None = None) -> Path:
     return out
 
 
-def _start_randomizing(cfg: RotateConfig, run_dir: Path, done: int) -> RotateConfig:
-    """``--resume RUN --randomize`` on a run trained on nominal physics: go on with randomised
-    physics (a fine-tune). config.json records it (``randomize``, ``randomized_from_step``);
-    the nominal run's ``best/`` moves to ``best_nominal/`` so that ``best/`` is chosen among
-    the randomised checkpoints."""
-    cfg = dataclasses.replace(cfg, randomize=True)
-    saved = json.loads((run_dir / "config.json").read_text())
-    saved.update(randomize=True, randomized_from_step=done)
-    (run_dir / "config.json").write_text(json.dumps(saved, indent=2) + "\n")
-    if (run_dir / "best").is_dir():
-        shutil.rmtree(run_dir / "best_nominal", ignore_errors=True)
-        (run_dir / "best").rename(run_dir / "best_nominal")
-    return cfg
-
-
-FINETUNE = (
-    "corner_prob",
-    "validate_corners",
-    "rotation_cap",
-    "drop_weight",
-    "height_weight",
-    "checkpoint_every",
-    "eval_episodes",
-)
-"""Fields that ``--resume`` takes from the command line when given there (a fine-tune may
-change them: the randomisation's sampling, the validation, the reward terms); every other
-saved field decides."""
-
-
-def _given(argv: Sequence[str], field: str) -> bool:
-    flag = "--" + field.replace("_", "-")
-    return any(a == flag or a.startswith(flag + "=") for a in argv)
-
-
-def _start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
-    """Record fine-tune options given with ``--resume`` in config.json (with
-    ``finetune_from_step``); when corner validation starts, the earlier ``best/`` (chosen on
-    other figures) moves to ``best_previous/``."""
-    saved = json.loads((run_dir / "config.json").read_text())
-    starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
-    saved.update(changed, finetune_from_step=done)
-    (run_dir / "config.json").write_text(json.dumps(saved, indent=2) + "\n")
-    if starts_corners and (run_dir / "best").is_dir():
-        shutil.rmtree(run_dir / "best_previous", ignore_errors=True)
-        (run_dir / "best").rename(run_dir / "best_previous")
-
-
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume), evaluate, save; returns the final evaluation."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -668,17 +544,17 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     name = f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
     keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
     if cfg.resume is not None:
-        keep += tuple(f for f in FINETUNE if _given(argv, f))
+        keep += tuple(f for f in FINETUNE if given(argv, f))
     cfg, run_dir = open_run(cfg, name, keep=keep)
     grasp_cache(
         cfg.object, cfg.gravity, **env_physics(cfg.timestep)
     )  # build the start-state cache once, before any worker
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
     if cfg.resume is not None and "--randomize" in argv and not cfg.randomize:
-        cfg = _start_randomizing(cfg, run_dir, done)
-    changed = {f: getattr(cfg, f) for f in FINETUNE if cfg.resume is not None and _given(argv, f)}
+        cfg = start_randomizing(cfg, run_dir, done)
+    changed = {f: getattr(cfg, f) for f in FINETUNE if cfg.resume is not None and given(argv, f)}
     if changed:
-        _start_finetune(run_dir, changed, done)
+        start_finetune(run_dir, changed, done)
     seeds = RunSeeds(cfg.seed, segment=done)
     seed_everything(seeds.global_seed)
     mon = run_dir / "monitor"

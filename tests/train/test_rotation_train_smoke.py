@@ -159,7 +159,8 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     assert worse["drop_rate"] == max(best["drop_rate"], best["corner_drop_rate"])
     assert worse["speed_rad_s"] == min(best["speed_rad_s"], best["corner_speed_rad_s"])
 
-    from train.rotation import RotateConfig, build_model, init_weights, make_env
+    from train.rotation import RotateConfig, build_model, make_env
+    from train.runfiles import init_weights
     from train.vec import make_vec_env
 
     cfg_c = RotateConfig(object="cube", pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
@@ -175,7 +176,7 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
 
     # --history 3 from a one-frame source: the widened nets compute what the source computes
     # from the newest frame, and the observation statistics are tiled over the frames
-    from train.rotation import init_normalizer
+    from train.runfiles import init_normalizer
 
     cfg_h = RotateConfig(history=3, pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
     vec_h = init_normalizer(make_vec_env([make_env(cfg_h)], 0), run_dir)
