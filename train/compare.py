@@ -46,7 +46,6 @@ def load_run(run_dir: Path, group_by: str = "shield") -> dict:
             evals = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
     return {
         "dir": run_dir,
-        "key": group_by,
         "group": str(cfg.get(group_by) if cfg.get(group_by) is not None else "none"),
         "seed": int(cfg.get("seed", -1)),
         "steps": steps,
@@ -55,14 +54,15 @@ def load_run(run_dir: Path, group_by: str = "shield") -> dict:
     }
 
 
-def summarise(run: dict) -> dict[str, float | str | int]:
-    """Final evaluation and the mean training return over the last 10 % of episodes."""
+def summarise(run: dict, group_by: str = "shield") -> dict[str, float | str | int]:
+    """Final evaluation and the mean training return over the last 10 % of episodes; the
+    run's group in the column ``group_by``."""
     ret = run["ret"]
     tail = ret[-max(1, len(ret) // 10) :] if len(ret) else np.zeros(0)
     last = run["evals"][-1] if run["evals"] else {}
     return {
         "run": run["dir"].name,
-        run["key"]: run["group"],
+        group_by: run["group"],
         "seed": run["seed"],
         "env_steps": int(run["steps"][-1]) if len(run["steps"]) else 0,
         "final_return": round(float(tail.mean()), 4) if len(tail) else float("nan"),
@@ -72,14 +72,13 @@ def summarise(run: dict) -> dict[str, float | str | int]:
     }
 
 
-def _plot(runs: list[dict], out: Path, window: int) -> None:
+def _plot(runs: list[dict], out: Path, window: int, field: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     groups = sorted({r["group"] for r in runs})
-    field = runs[0]["key"]
     colors = {g: f"C{i}" for i, g in enumerate(groups)}
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
     top = max((r["steps"][-1] for r in runs if len(r["steps"])), default=1)
@@ -135,11 +134,11 @@ def main(argv: Sequence[str] | None = None) -> list[dict]:
     runs = [load_run(d, args.group_by) for d in args.runs if d.is_dir()]
     if not runs:
         p.error("no run directories given")
-    rows = [summarise(r) for r in runs]
+    rows = [summarise(r, args.group_by) for r in runs]
     rows.sort(key=lambda r: (str(r[args.group_by]), r["seed"]))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_csv(args.out.with_suffix(".csv"), rows, columns=list(rows[0]))
-    _plot(runs, args.out.with_suffix(".png"), args.window)
+    _plot(runs, args.out.with_suffix(".png"), args.window, args.group_by)
     cols = list(rows[0])
     print(" | ".join(cols))
     for r in rows:

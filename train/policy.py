@@ -17,12 +17,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from stable_baselines3 import PPO
-from stable_baselines3.common.policies import ActorCriticPolicy
 
 from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
 from train.evaluation import RotationEpisode, one_by_one, run_episodes
 from train.rotation import env_physics, policy_dir
+from train.runfiles import load_actor_critic
 
 __all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy", "policy_dir"]
 
@@ -39,10 +38,7 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
     (:func:`train.rotation.policy_dir`), the policy its evaluations and export name.
     """
     run_dir = policy_dir(Path(run_dir))
-    if (run_dir / "policy.pt").is_file():
-        policy = ActorCriticPolicy.load(str(run_dir / "policy.pt"), device="cpu")
-    else:
-        policy = PPO.load(run_dir / "model.zip", device="cpu").policy
+    policy = load_actor_critic(run_dir)
     with (run_dir / "vecnormalize.pkl").open("rb") as f:
         norm = pickle.load(f)
     cfg = json.loads((run_dir / "config.json").read_text())

@@ -543,18 +543,16 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
     name = f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
     keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
-    if cfg.resume is not None:
-        keep += tuple(f for f in FINETUNE if given(argv, f))
-    cfg, run_dir = open_run(cfg, name, keep=keep)
+    finetune = tuple(f for f in FINETUNE if given(argv, f)) if cfg.resume is not None else ()
+    cfg, run_dir = open_run(cfg, name, keep=keep + finetune)
     grasp_cache(
         cfg.object, cfg.gravity, **env_physics(cfg.timestep)
     )  # build the start-state cache once, before any worker
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
-    if cfg.resume is not None and "--randomize" in argv and not cfg.randomize:
+    if cfg.resume is not None and given(argv, "randomize") and not cfg.randomize:
         cfg = start_randomizing(cfg, run_dir, done)
-    changed = {f: getattr(cfg, f) for f in FINETUNE if cfg.resume is not None and given(argv, f)}
-    if changed:
-        start_finetune(run_dir, changed, done)
+    if finetune:
+        start_finetune(run_dir, {f: getattr(cfg, f) for f in finetune}, done)
     seeds = RunSeeds(cfg.seed, segment=done)
     seed_everything(seeds.global_seed)
     mon = run_dir / "monitor"

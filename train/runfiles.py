@@ -30,6 +30,7 @@ __all__ = [
     "given",
     "init_normalizer",
     "init_weights",
+    "load_actor_critic",
     "policy_dir",
     "start_finetune",
     "start_randomizing",
@@ -47,12 +48,7 @@ def init_weights(model: PPO, source: Path) -> None:
     A source that saw fewer frames (``--history``) than ``model`` does is widened: the first
     layers' weights on the older frames are zero, so the new net computes exactly what the
     source computed from the newest frame until training uses the older ones."""
-    src = policy_dir(Path(source))
-    if (src / "policy.pt").is_file():
-        policy = ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
-    else:
-        policy = PPO.load(src / "model.zip", device="cpu").policy
-    state = policy.state_dict()
+    state = load_actor_critic(Path(source)).state_dict()
     target = model.policy.state_dict()
     for k in FIRST_LAYERS:
         w, t = state.get(k), target.get(k)
@@ -66,6 +62,16 @@ def init_weights(model: PPO, source: Path) -> None:
         raise ValueError(
             f"--init-from {source}: its nets do not match --pi/--vf/--history ({e})"
         ) from e
+
+
+def load_actor_critic(run_dir: Path) -> ActorCriticPolicy:
+    """The policy of a run or policy directory (:func:`policy_dir`: its ``best/`` when it kept
+    one), on the CPU: ``policy.pt`` (``ActorCriticPolicy.save``, a shipped policy) when there
+    is one, else the policy of ``model.zip``."""
+    src = policy_dir(Path(run_dir))
+    if (src / "policy.pt").is_file():
+        return ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
+    return PPO.load(src / "model.zip", device="cpu").policy
 
 
 def init_normalizer(vec: VecEnv, source: Path) -> VecNormalize:
@@ -126,14 +132,8 @@ def start_randomizing(cfg: Any, run_dir: Path, done: int) -> Any:
     physics (a fine-tune). config.json records it (``randomize``, ``randomized_from_step``);
     the nominal run's ``best/`` moves to ``best_nominal/`` so that ``best/`` is chosen among
     the randomised checkpoints."""
-    cfg = dataclasses.replace(cfg, randomize=True)
-    saved = json.loads((run_dir / "config.json").read_text())
-    saved.update(randomize=True, randomized_from_step=done)
-    (run_dir / "config.json").write_text(json.dumps(saved, indent=2) + "\n")
-    if (run_dir / "best").is_dir():
-        shutil.rmtree(run_dir / "best_nominal", ignore_errors=True)
-        (run_dir / "best").rename(run_dir / "best_nominal")
-    return cfg
+    _record(run_dir, {"randomize": True, "randomized_from_step": done}, best_aside="best_nominal")
+    return dataclasses.replace(cfg, randomize=True)
 
 
 FINETUNE = (
@@ -162,8 +162,18 @@ def start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
     other figures) moves to ``best_previous/``."""
     saved = json.loads((run_dir / "config.json").read_text())
     starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
-    saved.update(changed, finetune_from_step=done)
-    (run_dir / "config.json").write_text(json.dumps(saved, indent=2) + "\n")
-    if starts_corners and (run_dir / "best").is_dir():
-        shutil.rmtree(run_dir / "best_previous", ignore_errors=True)
-        (run_dir / "best").rename(run_dir / "best_previous")
+    _record(
+        run_dir,
+        {**changed, "finetune_from_step": done},
+        best_aside="best_previous" if starts_corners else None,
+    )
+
+
+def _record(run_dir: Path, fields: dict[str, Any], best_aside: str | None) -> None:
+    """Update ``fields`` in the run's config.json; with ``best_aside``, move an existing
+    ``best/`` to that name (replacing an earlier one) so that ``best/`` is chosen afresh."""
+    path = run_dir / "config.json"
+    path.write_text(json.dumps({**json.loads(path.read_text()), **fields}, indent=2) + "\n")
+    if best_aside is not None and (run_dir / "best").is_dir():
+        shutil.rmtree(run_dir / best_aside, ignore_errors=True)
+        (run_dir / "best").rename(run_dir / best_aside)
