@@ -25,7 +25,8 @@ and counted (``unheld_starts``). The robustness table reports both: the policy's
 Writes ``eval_heldout.json`` and, with ``--corners``, ``robustness.csv`` (one row per corner
 of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with ``--factors``
 ``factors.csv`` (one factor at a time, :func:`factors`) to ``--out`` (default: the policy
-directory).
+directory). ``--grip firm`` starts every episode from the firm-grip test grasps
+(:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.four_finger import FourFingerRotate, PhysicsSample, Randomization, corners
+from envs.four_finger import GRIPS, FourFingerRotate, PhysicsSample, Randomization, corners
 from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train.evaluation import RotationEpisode, run_episodes
@@ -173,12 +174,13 @@ def factors(r: Randomization | None = None) -> list[PhysicsSample]:
     ]
 
 
-def _corner_job(args: tuple[str, PhysicsSample, int, float, bool]) -> dict[str, Any]:
-    policy_dir, physics, episodes, seconds, screen = args
+def _corner_job(args: tuple[str, PhysicsSample, int, float, bool, str | None]) -> dict[str, Any]:
+    policy_dir, physics, episodes, seconds, screen, grip = args
     import torch
 
     torch.set_num_threads(1)
     act, kw = load_policy(Path(policy_dir))
+    kw = kw if grip is None else {**kw, "grip": grip}
     res = evaluate_heldout(act, kw, episodes, seconds, physics=physics)
     res.pop("grasps")
     row = {"corner": physics.label(), **res}
@@ -202,13 +204,15 @@ def robustness(
     workers: int = 2,
     single: bool = False,
     screen: bool = False,
+    grip: str | None = None,
 ) -> list[dict[str, Any]]:
     """:func:`evaluate_heldout` at every corner of ``randomization`` (default: the env's
     :class:`Randomization`; ``single``: at each of its :func:`factors` instead), ``episodes``
     per case, ``workers`` processes; ``screen``: also from screened start grasps
-    (``screened_*`` and ``unheld_starts`` columns; module doc)."""
+    (``screened_*`` and ``unheld_starts`` columns; module doc); ``grip``: start grasps of
+    that grip instead of the policy's own (:data:`envs.four_finger.GRIPS`)."""
     cases = corners(randomization) if not single else factors(randomization)
-    jobs = [(str(policy_dir), c, episodes, seconds, screen) for c in cases]
+    jobs = [(str(policy_dir), c, episodes, seconds, screen, grip) for c in cases]
     if workers <= 1:
         return [_corner_job(j) for j in jobs]
     with ProcessPoolExecutor(workers) as pool:
@@ -229,6 +233,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         action="store_true",
         help="corners/factors also from start grasps that hold still under the case's physics",
     )
+    p.add_argument(
+        "--grip",
+        choices=GRIPS,
+        default=None,
+        help="start grasps of this grip instead of the policy's own (nominal or firm)",
+    )
     p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
     a = p.parse_args(argv)
     if not 1 <= a.episodes <= TEST_GRASPS or a.corner_episodes < 1 or a.seconds <= 0:
@@ -238,6 +248,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("MUJOCO_GL", "egl")
     act, kw = load_policy(policy)
+    kw = kw if a.grip is None else {**kw, "grip": a.grip}
     res = evaluate_heldout(act, kw, a.episodes, a.seconds)
     (out / "eval_heldout.json").write_text(json.dumps(res, indent=2) + "\n")
     print(_line(f"{policy} nominal", res))
@@ -246,7 +257,13 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         if not wanted:
             continue
         rows = robustness(
-            policy, a.corner_episodes, a.seconds, workers=a.workers, single=single, screen=a.screen
+            policy,
+            a.corner_episodes,
+            a.seconds,
+            workers=a.workers,
+            single=single,
+            screen=a.screen,
+            grip=a.grip,
         )
         cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
         if a.screen:

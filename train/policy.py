@@ -51,6 +51,7 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         return a
 
     keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1}
+    keys["grip"] = "nominal"
     kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
     return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
 

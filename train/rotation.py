@@ -48,6 +48,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import (
     FRAME_SKIP,
+    GRIPS,
     OBJECTS,
     TIMESTEP,
     PhysicsSample,
@@ -191,6 +192,12 @@ class RotateConfig:
         "randomised physics in the training envs (envs.four_finger.Randomization: friction, "
         "torsional friction, mass, servo gains, latency, sensor noise); evaluations stay nominal",
     )
+    grip: str = opt(
+        "nominal",
+        "start grasps' squeeze: nominal (the thesis' inward grip) or firm (also lifting the "
+        "object and 1 N harder, verified to hold still at the worst --randomize corner)",
+        choices=GRIPS,
+    )
     corner_prob: float = opt(
         0.0,
         "with --randomize: probability that a training episode's physics is one of the 16 "
@@ -316,6 +323,7 @@ def make_env(
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
             history=cfg.history,
+            grip=cfg.grip,
             randomize=training_randomization(cfg) if train and physics is None else None,
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,

@@ -144,9 +144,11 @@ FINETUNE = (
     "height_weight",
     "checkpoint_every",
     "eval_episodes",
+    "grip",
 )
 """Fields that ``--resume`` takes from the command line when given there (a fine-tune may
-change them: the randomisation's sampling, the validation, the reward terms); every other
+change them: the randomisation's sampling, the validation, the reward terms, the start
+grasps' grip); every other
 saved field decides."""
 
 

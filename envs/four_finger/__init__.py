@@ -17,11 +17,15 @@ Every public name of these modules is importable from ``envs.four_finger``.
 """
 
 from envs.four_finger.cache import (
+    FIRM_LIFT,
+    FIRM_SQUEEZE,
     GRASP_SETS,
+    GRIPS,
     VERIFY_STEPS,
     GraspCache,
     generate_grasps,
     grasp_cache,
+    worst_hold,
 )
 from envs.four_finger.env import N_OBS, FourFingerRotate, yaw_rate, z_twist
 from envs.four_finger.physics import (
@@ -46,7 +50,10 @@ from envs.four_finger.states import STATE_SPEC, policy_step_outcomes, save_state
 
 __all__ = [
     "CONTACT_LINKS",
+    "FIRM_LIFT",
+    "FIRM_SQUEEZE",
     "GRASP_SETS",
+    "GRIPS",
     "DROP_Z",
     "FRAME_SKIP",
     "MAX_FORCE",
@@ -74,6 +81,7 @@ __all__ = [
     "policy_step_outcomes",
     "save_state",
     "scene_name",
+    "worst_hold",
     "yaw_rate",
     "z_twist",
 ]

@@ -30,16 +30,41 @@ from envs.four_finger.physics import (
     Physics,
     scene_name,
 )
+from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
 from ihm.hands import four_finger as ff
 
-__all__ = ["GRASP_SETS", "VERIFY_STEPS", "GraspCache", "generate_grasps", "grasp_cache"]
+__all__ = [
+    "FIRM_LIFT",
+    "FIRM_SQUEEZE",
+    "GRASP_SETS",
+    "GRIPS",
+    "VERIFY_STEPS",
+    "GraspCache",
+    "generate_grasps",
+    "grasp_cache",
+    "worst_hold",
+]
 
 VERIFY_STEPS = 40  # policy steps a cached grasp must hold with zero actions
 GRASP_SETS = {"train": 0, "test": 1_000_003}
 """Generator seeds of the start-grasp sets: ``train`` (every training run and the trainers'
 own validation) and ``test`` (held-out evaluation: a disjoint random stream, so no training
 grasp is ever an evaluation grasp)."""
+GRIPS = ("nominal", "firm")
+"""How the generator sets the start grasp's squeeze: ``nominal`` (the thesis' inward grip,
+the weight carried by the springs' sag and friction) or ``firm`` (setpoints that also lift
+the object and squeeze harder, verified under the worst randomised physics too)."""
+FIRM_LIFT = 1.2  # firm grip: designed upward force, in object weights (nominal mass)
+FIRM_SQUEEZE = 1.0  # [N] firm grip: extra inward force per touching finger
 _GENERATOR_VERSION = 2  # bump when generate_grasps changes
+
+
+def worst_hold(r: Randomization | None = None) -> PhysicsSample:
+    """The physics under which a still hand holds worst: ``r``'s lowest friction and
+    torsional friction, highest mass and lowest gain (no latency or noise: the hand is still).
+    Measured: these corners drop 12 of 20 nominal start grasps with the hand still."""
+    r = r or Randomization()
+    return PhysicsSample(r.friction[0], r.torsional[0], r.mass[1], r.gain[0])
 
 
 @dataclass(frozen=True)
@@ -63,6 +88,7 @@ def generate_grasps(
     timestep: float = TIMESTEP,
     frame_skip: int = FRAME_SKIP,
     max_candidates: int | None = None,
+    grip: str = "nominal",
 ) -> GraspCache:
     """Varied stable grasps of ``obj``, each verified to hold with zero actions.
 
@@ -82,14 +108,28 @@ def generate_grasps(
        steps with the setpoints fixed (zero actions): not dropped, moved less
        than 5 mm and turned less than 0.1 rad, at least two fingers touching.
 
+    ``grip="firm"`` adds, before step 4, to each touching finger's setpoints
+    ``q_c += J_c^T f_c / kp`` with ``f_c = FIRM_SQUEEZE * h_c + (FIRM_LIFT * m g / n) e_z``:
+    ``J_c`` the finger's translational Jacobian at its contact (the distal link's if it
+    touches, else the proximal's), ``h_c`` the horizontal unit vector from the contact to
+    the object's axis, ``m g`` the object's nominal weight, ``n`` the touching fingers. The
+    nominal grip's setpoints press only inward, so the weight is carried by the springs'
+    sag and friction alone; this one presses up as well (1.2 weights: between the lightest
+    and heaviest randomised masses, so friction carries at most 0.8 weights either way) and
+    1 N harder. The grasp rests 0.5 s, and step 4 also runs under :func:`worst_hold`
+    physics (from the same state), where the object must not drop or sink 5 mm.
+
     Returns the first ``n`` kept grasps (their state before the check).
     """
+    if grip not in GRIPS:
+        raise FourFingerError(f"grip must be one of {list(GRIPS)}, got {grip!r}")
     scene = scene_name(obj)
     rng = np.random.default_rng(seed)
     ph = Physics(obj, gravity, timestep)
     m, d = ph.model, ph.data
     key = m.key("init").id
     preload = ihm.scenes.default_preload(m)
+    scaler = ModelScaler(m, d, ph.obj_body) if grip == "firm" else None
     grip_steps = int(round(0.3 / timestep))
     qpos, ctrl = [], []
     tries = 0
@@ -115,6 +155,9 @@ def generate_grasps(
             d.ctrl[3 * k + 1 : 3 * k + 3] -= 0.5
             d.ctrl[:] = np.clip(d.ctrl, ph.ctrl_lo, ph.ctrl_hi)
             mujoco.mj_step(m, d, nstep=int(round(0.5 / timestep)))
+        if scaler is not None:
+            _firm(ph)
+            mujoco.mj_step(m, d, nstep=int(round(0.5 / timestep)))
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
         if ph.dropped():
@@ -131,6 +174,10 @@ def generate_grasps(
             or np.linalg.norm(ph.object_pos() - p0) > 5e-3
             or np.linalg.norm(rot) > 0.1
             or fingers < 2
+        ):
+            continue
+        if scaler is not None and not _holds_worst(
+            ph, scaler, state_q, state_c, VERIFY_STEPS * frame_skip
         ):
             continue
         qpos.append(state_q)
@@ -163,19 +210,67 @@ def _close(
     mujoco.mj_step(m, d, nstep=grip_steps + grip_steps // 2 + 1)
 
 
+def _firm(ph: Physics) -> None:
+    """The firm grip's setpoint change (:func:`generate_grasps`)."""
+    m, d = ph.model, ph.data
+    centre = ph.object_pos().copy()
+    pos, fn, _ = ph.link_contacts()
+    fingers = [k for k in range(4) if fn[2 * k] + fn[2 * k + 1] > 1e-3]
+    if not fingers:
+        return
+    lift = FIRM_LIFT * float(m.body_mass[ph.obj_body]) * float(-m.opt.gravity[2]) / len(fingers)
+    jac = np.zeros((3, m.nv))
+    tau = np.zeros(ff.NU)
+    for k in fingers:
+        s = 2 * k + 1 if fn[2 * k + 1] > 1e-3 else 2 * k
+        h = centre - pos[s]
+        h[2] = 0.0
+        f = FIRM_SQUEEZE * h / max(float(np.linalg.norm(h)), 1e-9) + np.array([0.0, 0.0, lift])
+        mujoco.mj_jac(m, d, jac, None, pos[s], m.body(ff.BODY_NAMES[s]).id)
+        tau[3 * k : 3 * k + 3] = (jac[:, 3 * k : 3 * k + 3]).T @ f
+    d.ctrl[:] = np.clip(d.ctrl + tau / m.actuator_gainprm[:, 0], ph.ctrl_lo, ph.ctrl_hi)
+
+
+def _holds_worst(
+    ph: Physics,
+    scaler: ModelScaler,
+    qpos: NDArray[np.float64],
+    ctrl: NDArray[np.float64],
+    steps: int,
+) -> bool:
+    """Whether the grasp (``qpos``, ``ctrl``, at rest) holds for ``steps`` substeps under
+    :func:`worst_hold` physics: not dropped, sunk less than 5 mm. Leaves nominal physics."""
+    m, d = ph.model, ph.data
+    scaler.apply(worst_hold())
+    try:
+        mujoco.mj_resetData(m, d)
+        d.qpos[:], d.ctrl[:] = qpos, ctrl
+        mujoco.mj_forward(m, d)
+        z0 = float(ph.object_pos()[2])
+        mujoco.mj_step(m, d, nstep=steps)
+        return not ph.dropped() and z0 - float(ph.object_pos()[2]) < 5e-3
+    finally:
+        scaler.apply(PhysicsSample())
+
+
 def _cache_dir() -> Path:
     return Path(os.environ.get("IHM_CACHE", Path.home() / ".cache" / "ihm")) / "grasps"
 
 
-def _cache_key(obj: str, gravity: bool, n: int, seed: int, timestep: float, frame_skip: int) -> str:
+def _cache_key(
+    obj: str, gravity: bool, n: int, seed: int, timestep: float, frame_skip: int, grip: str
+) -> str:
     h = hashlib.sha256()
     for path in (ihm.scenes.scene_path(scene_name(obj)), ff.XML):
         h.update(Path(path).read_bytes())
     settings = (gravity, n, seed, timestep, frame_skip, "pgs", SOLVER_TOLERANCE, "condim4")
     settings += (mujoco.__version__,)
+    if grip != "nominal":  # the nominal grip's keys (and caches) predate the option
+        settings += (grip, FIRM_LIFT, FIRM_SQUEEZE, worst_hold())
     h.update(repr(settings).encode())
     h.update(repr(_GENERATOR_VERSION).encode())
-    return f"{obj}_{'g' if gravity else 'nog'}_{n}_{h.hexdigest()[:16]}"
+    tag = "" if grip == "nominal" else f"{grip}_"
+    return f"{obj}_{tag}{'g' if gravity else 'nog'}_{n}_{h.hexdigest()[:16]}"
 
 
 _MEMORY: dict[str, GraspCache] = {}
@@ -189,9 +284,12 @@ def grasp_cache(
     seed: int = 0,
     timestep: float = TIMESTEP,
     frame_skip: int = FRAME_SKIP,
+    grip: str = "nominal",
 ) -> GraspCache:
     """:func:`generate_grasps`, memoised in the process and on disk (``$IHM_CACHE``)."""
-    key = _cache_key(obj, gravity, n, seed, timestep, frame_skip)
+    if grip not in GRIPS:
+        raise FourFingerError(f"grip must be one of {list(GRIPS)}, got {grip!r}")
+    key = _cache_key(obj, gravity, n, seed, timestep, frame_skip, grip)
     if key in _MEMORY:
         return _MEMORY[key]
     path = _cache_dir() / f"{key}.npz"
@@ -204,7 +302,7 @@ def grasp_cache(
             cache = None  # a broken file is rebuilt
     if cache is None:
         cache = generate_grasps(
-            obj, gravity, n, seed=seed, timestep=timestep, frame_skip=frame_skip
+            obj, gravity, n, seed=seed, timestep=timestep, frame_skip=frame_skip, grip=grip
         )
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

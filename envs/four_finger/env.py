@@ -85,7 +85,9 @@ and the cache. Each cached grasp is verified to hold for ``VERIFY_STEPS`` policy
 zero actions. The cache is built on first use (about 10-30 s per object and gravity setting)
 and kept on disk under ``$IHM_CACHE`` (default ``~/.cache/ihm``). ``grasps="test"`` starts
 from the held-out set instead (a generator seed no training run uses,
-:data:`envs.four_finger.GRASP_SETS`).
+:data:`envs.four_finger.GRASP_SETS`). ``grip="firm"`` makes the start grasps press up and
+1 N harder and keeps only those that hold still under the worst randomised physics as well
+(half the friction, twice the mass, weak servos), where half the nominal grip's drop.
 
 ## Physics
 
@@ -180,6 +182,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
     grasps : start-grasp set, ``"train"`` or ``"test"`` (held out).
     n_grasps : size of the starting-state cache.
+    grip : how the start grasps squeeze, ``"nominal"`` (the thesis' inward grip) or
+        ``"firm"`` (also lifting the object and 1 N harder, verified to hold still under
+        the worst randomised physics): :data:`envs.four_finger.cache.GRIPS`.
     render_mode : ``None`` or ``"rgb_array"``; ``width``, ``height`` [px];
         ``camera``: ``"side"`` or ``"top"``.
     torsional : contacts with the skin's torsional friction (``condim`` 4, coefficient
@@ -213,6 +218,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         physics: PhysicsSample | None = None,
         grasps: str = "train",
         n_grasps: int = 256,
+        grip: str = "nominal",
         render_mode: str | None = None,
         width: int = 480,
         height: int = 480,
@@ -275,7 +281,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             seed=GRASP_SETS[grasps],
             timestep=float(timestep),
             frame_skip=self.frame_skip,
+            grip=grip,
         )
+        self.grip = grip
         self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
         lo = np.concatenate(
             [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]

@@ -125,8 +125,8 @@ def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> No
 
 
 def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> None:
-    """``--resume RUN --randomize --corner-prob P --validate-corners N``: config.json records
-    the fine-tune, eval.csv gains the pooled corner figures (16 corners x N episodes), the
+    """``--resume RUN --randomize --corner-prob P --validate-corners N --grip firm``:
+    config.json records the fine-tune (and the policy loads with the firm start grasps), eval.csv gains the pooled corner figures (16 corners x N episodes), the
     earlier ``best/`` moves aside (``best_nominal/``) and the new ``best/`` is ranked on the
     worse of nominal and corners. ``--init-from RUN --object cube`` starts a new run from the
     run's weights (equal before training); nets that do not match are refused by name."""
@@ -144,11 +144,14 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     assert (run_dir / "best" / "model.zip").is_file()
     q = _train_ppo(
         "--resume", str(run_dir), "--randomize", "--corner-prob", "0.5", "--validate-corners",
-        "1", "--total-steps", "128", "--no-progress", "--workers", "0",
+        "1", "--total-steps", "128", "--no-progress", "--workers", "0", "--grip", "firm",
     )  # fmt: skip
     assert q.returncode == 0, q.stderr[-2000:]
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["randomize"] and cfg["corner_prob"] == 0.5 and cfg["validate_corners"] == 1
+    from train.policy import load_policy
+
+    assert cfg["grip"] == "firm" and load_policy(run_dir)[1]["grip"] == "firm"
     assert cfg["finetune_from_step"] == 128
     rows = (run_dir / "eval.csv").read_text().splitlines()
     assert "corner_drop_rate" in rows[0] and rows[-1].split(",")[-1] == "16"
