@@ -126,10 +126,11 @@ def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> No
 
 def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> None:
     """``--resume RUN --randomize --corner-prob P --validate-corners N --grip firm``:
-    config.json records the fine-tune (and the policy loads with the firm start grasps), eval.csv gains the pooled corner figures (16 corners x N episodes), the
-    earlier ``best/`` moves aside (``best_nominal/``) and the new ``best/`` is ranked on the
-    worse of nominal and corners. ``--init-from RUN --object cube`` starts a new run from the
-    run's weights (equal before training); nets that do not match are refused by name."""
+    config.json records the fine-tune (and the policy loads with the firm start grasps),
+    eval.csv gains the pooled corner figures (16 corners x N episodes), the earlier ``best/``
+    moves aside (``best_nominal/``) and the new ``best/`` is ranked on the worse of nominal
+    and corners. ``--init-from RUN --object cube`` starts a new run from the run's weights
+    (equal before training); nets that do not match are refused by name."""
     import torch
     from stable_baselines3 import PPO
 
