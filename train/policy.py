@@ -53,6 +53,7 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
     keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1}
     keys["grip"] = "nominal"
     kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
+    kwargs["privileged"] = bool(cfg.get("privileged_critic", False))
     return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
 
 

@@ -49,6 +49,8 @@ import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import (
     FRAME_SKIP,
     GRIPS,
+    N_OBS,
+    N_PRIVILEGED,
     OBJECTS,
     TIMESTEP,
     PhysicsSample,
@@ -73,6 +75,7 @@ from train.runfiles import (
     start_randomizing,
 )
 from train.sb3 import (
+    RolloutThreads,
     build_parser,
     learning_rate,
     new_ppo,
@@ -92,7 +95,6 @@ __all__ = [
     "POLICY_DT",
     "TARGET_SPEED",
     "EvalCallback",
-    "RolloutThreads",
     "RotateConfig",
     "build_model",
     "checkpoint",
@@ -230,6 +232,11 @@ class RotateConfig:
         "observed frames: the actor and critic see the last N sensed observations (joints, "
         "setpoints, contacts), oldest first; 1: the thesis' single frame",
     )
+    privileged_critic: bool = opt(
+        False,
+        "asymmetric critic: the value net also reads the object's pose and velocity and the "
+        "episode's physics (envs.four_finger N_PRIVILEGED); the actor reads what the hand senses",
+    )
     init_from: str | None = opt(
         None,
         "run or policy directory whose policy and value weights and observation statistics "
@@ -266,6 +273,8 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         problems.append(
             "--eval-episodes and --workers must be >= 0, --checkpoint-every and --threads >= 1"
         )
+    if cfg.privileged_critic and cfg.shield != "none":
+        problems.append("--privileged-critic cannot be combined with a --shield")
     if not 0.0 <= cfg.corner_prob <= 1.0 or cfg.validate_corners < 0:
         problems.append("--corner-prob must be in [0, 1] and --validate-corners >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
@@ -323,6 +332,7 @@ def make_env(
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
             history=cfg.history,
+            privileged=cfg.privileged_critic,
             grip=cfg.grip,
             randomize=training_randomization(cfg) if train and physics is None else None,
             physics=physics,
@@ -353,28 +363,8 @@ def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
     ``cfg.lr_schedule`` (:func:`train.sb3.learning_rate`);
     :class:`train.pipeline.PipelinedPPO`, which pipelines its rollouts over a
     ``ChunkedVecEnv`` with parts and is plain SB3 PPO on any other env."""
-    return new_ppo(cfg, vec_env, learning_rate(cfg), algo=PipelinedPPO)
-
-
-class RolloutThreads(BaseCallback):
-    """Torch on one thread while collecting rollouts, ``threads`` for the update.
-
-    With worker processes stepping the envs, two torch threads in the training process
-    spin between the small forward passes and take the workers' cores (measured: 2 workers
-    became slower than none)."""
-
-    def __init__(self, threads: int) -> None:
-        super().__init__()
-        self.threads = threads
-
-    def _on_rollout_start(self) -> None:
-        torch.set_num_threads(1)
-
-    def _on_step(self) -> bool:
-        return True
-
-    def _on_rollout_end(self) -> None:
-        torch.set_num_threads(self.threads)
+    actor_obs = N_OBS * cfg.history if cfg.privileged_critic else None
+    return new_ppo(cfg, vec_env, learning_rate(cfg), algo=PipelinedPPO, actor_obs=actor_obs)
 
 
 def validation_key(res: dict[str, Any]) -> tuple[bool, float]:
@@ -575,7 +565,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         vec = VecNormalize.load(str(stats), vec)
     elif cfg.init_from is not None:
         try:
-            vec = init_normalizer(vec, Path(cfg.init_from))
+            priv = N_PRIVILEGED if cfg.privileged_critic else 0
+            vec = init_normalizer(vec, Path(cfg.init_from), priv)
         except ValueError as e:
             vec.close()
             raise SystemExit(f"python -m train.ppo: error: {e}") from None

@@ -23,6 +23,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
+from train.sb3 import PrivilegedCriticPolicy
+
 __all__ = [
     "FINETUNE",
     "checkpoint",
@@ -47,15 +49,20 @@ def init_weights(model: PPO, source: Path) -> None:
 
     A source that saw fewer frames (``--history``) than ``model`` does is widened: the first
     layers' weights on the older frames are zero, so the new net computes exactly what the
-    source computed from the newest frame until training uses the older ones."""
+    source computed from the newest frame until training uses the older ones. So are the
+    weights on the privileged state of a :class:`train.sb3.PrivilegedCriticPolicy` model
+    (``--privileged-critic``) started from a source without it."""
     state = load_actor_critic(Path(source)).state_dict()
     target = model.policy.state_dict()
+    priv = _privileged(model)
     for k in FIRST_LAYERS:
         w, t = state.get(k), target.get(k)
         if w is not None and t is not None and w.shape != t.shape and w.shape[0] == t.shape[0]:
-            n_src, n_new = w.shape[1], t.shape[1]
-            if n_new % n_src == 0:  # older frames first: zeros, then the source's weights
-                state[k] = torch.cat([torch.zeros(w.shape[0], n_new - n_src), w], dim=1)
+            n_src, n_frames = w.shape[1], t.shape[1] - priv
+            if n_frames % n_src == 0:  # older frames: zeros, the source's, privileged: zeros
+                z = w.shape[0]
+                parts = [torch.zeros(z, n_frames - n_src), w, torch.zeros(z, priv)]
+                state[k] = torch.cat(parts, dim=1)
     try:
         model.policy.load_state_dict(state)
     except RuntimeError as e:
@@ -70,22 +77,32 @@ def load_actor_critic(run_dir: Path) -> ActorCriticPolicy:
     is one, else the policy of ``model.zip``."""
     src = policy_dir(Path(run_dir))
     if (src / "policy.pt").is_file():
-        return ActorCriticPolicy.load(str(src / "policy.pt"), device="cpu")
+        saved = torch.load(src / "policy.pt", map_location="cpu", weights_only=False)
+        cls = PrivilegedCriticPolicy if "actor_obs" in saved["data"] else ActorCriticPolicy
+        return cls.load(str(src / "policy.pt"), device="cpu")
     return PPO.load(src / "model.zip", device="cpu").policy
 
 
-def init_normalizer(vec: VecEnv, source: Path) -> VecNormalize:
+def _privileged(model: PPO) -> int:
+    """Observation entries after the actor's (the critic's privileged state), 0 if none."""
+    pol = model.policy
+    n = int(np.prod(pol.observation_space.shape))
+    return n - pol.actor_obs if isinstance(pol, PrivilegedCriticPolicy) else 0
+
+
+def init_normalizer(vec: VecEnv, source: Path, privileged: int = 0) -> VecNormalize:
     """``VecNormalize`` over ``vec`` that starts from the observation and return statistics of
     ``source`` (a run or policy directory), tiled over ``vec``'s frames when it observes
-    more (``--history``); the statistics go on updating."""
+    more (``--history``); the last ``privileged`` entries, which the source did not observe,
+    start at mean 0, variance 1. The statistics go on updating."""
     with (policy_dir(Path(source)) / "vecnormalize.pkl").open("rb") as f:
         old = pickle.load(f)
     norm = VecNormalize(vec, gamma=old.gamma)
-    reps, rem = divmod(norm.obs_rms.mean.shape[0], old.obs_rms.mean.shape[0])
-    if rem:
+    reps, rem = divmod(norm.obs_rms.mean.shape[0] - privileged, old.obs_rms.mean.shape[0])
+    if rem or reps < 1:
         raise ValueError(f"--init-from {source}: observation sizes do not match")
-    norm.obs_rms.mean = np.tile(old.obs_rms.mean, reps)
-    norm.obs_rms.var = np.tile(old.obs_rms.var, reps)
+    norm.obs_rms.mean = np.concatenate([np.tile(old.obs_rms.mean, reps), np.zeros(privileged)])
+    norm.obs_rms.var = np.concatenate([np.tile(old.obs_rms.var, reps), np.ones(privileged)])
     norm.obs_rms.count = old.obs_rms.count
     norm.ret_rms = old.ret_rms
     return norm

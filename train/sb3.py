@@ -25,6 +25,9 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 from tqdm import tqdm
@@ -32,6 +35,9 @@ from tqdm import tqdm
 from stability.cli import ArgumentParser
 
 __all__ = [
+    "ActorView",
+    "PrivilegedCriticPolicy",
+    "RolloutThreads",
     "TqdmProgress",
     "build_parser",
     "learning_rate",
@@ -161,19 +167,73 @@ def learning_rate(cfg: Any) -> float | Callable[[float], float]:
     return LinearSchedule(cfg.learning_rate, 0.0, 1.0)
 
 
+class ActorView(BaseFeaturesExtractor):
+    """The actor's features: the flattened observation with every entry from ``actor_obs``
+    on set to zero (the privileged state that only the critic may read). Same width as the
+    observation, so the actor's first layer gets no signal, and no gradient, from them."""
+
+    def __init__(self, observation_space: Any, actor_obs: int) -> None:
+        super().__init__(observation_space, get_flattened_obs_dim(observation_space))
+        mask = torch.zeros(self.features_dim)
+        mask[:actor_obs] = 1.0
+        self.register_buffer("mask", mask, persistent=False)
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        return torch.flatten(observations, 1) * self.mask
+
+
+class PrivilegedCriticPolicy(ActorCriticPolicy):
+    """An asymmetric actor-critic: the actor reads the first ``actor_obs`` observation
+    entries (:class:`ActorView`), the critic all of them (separate feature extractors)."""
+
+    def __init__(self, *args: Any, actor_obs: int, **kwargs: Any) -> None:
+        kwargs["share_features_extractor"] = False
+        super().__init__(*args, **kwargs)
+        self.actor_obs = int(actor_obs)
+        self.pi_features_extractor = ActorView(self.observation_space, self.actor_obs)
+        self.features_extractor = self.pi_features_extractor
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "actor_obs": self.actor_obs}
+
+
+class RolloutThreads(BaseCallback):
+    """Torch on one thread while collecting rollouts, ``threads`` for the update.
+
+    With worker processes stepping the envs, two torch threads in the training process
+    spin between the small forward passes and take the workers' cores (measured: 2 workers
+    became slower than none)."""
+
+    def __init__(self, threads: int) -> None:
+        super().__init__()
+        self.threads = threads
+
+    def _on_rollout_start(self) -> None:
+        torch.set_num_threads(1)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        torch.set_num_threads(self.threads)
+
+
 def new_ppo(
     cfg: Any,
     vec_env: VecEnv,
     learning_rate: float | Callable[[float], float],
     algo: type[PPO] = PPO,
+    actor_obs: int | None = None,
 ) -> PPO:
     """SB3 PPO (or the subclass ``algo``) from a config's settings: separate policy and value
     nets ``cfg.pi``/``cfg.vf``, CPU, and ``seed=None``: SB3's own seeding would reset the envs
     with ``seed + i`` (the VecEnv's consecutive seeds), undoing :mod:`train.seeding`; call
     :func:`seed_everything` first (the policy's initial weights come from torch's global
-    generator)."""
+    generator). ``actor_obs``: a :class:`PrivilegedCriticPolicy` whose actor reads that many
+    leading observation entries."""
+    extra = {} if actor_obs is None else {"actor_obs": actor_obs}
     return algo(
-        "MlpPolicy",
+        "MlpPolicy" if actor_obs is None else PrivilegedCriticPolicy,
         vec_env,
         learning_rate=learning_rate,
         n_steps=cfg.n_steps,
@@ -186,6 +246,7 @@ def new_ppo(
         policy_kwargs={
             "net_arch": {"pi": list(cfg.pi), "vf": list(cfg.vf)},
             "log_std_init": cfg.log_std_init,
+            **extra,
         },
         seed=None,
         device="cpu",

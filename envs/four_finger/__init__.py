@@ -27,7 +27,7 @@ from envs.four_finger.cache import (
     grasp_cache,
     worst_hold,
 )
-from envs.four_finger.env import N_OBS, FourFingerRotate, yaw_rate, z_twist
+from envs.four_finger.env import N_OBS, N_PRIVILEGED, FourFingerRotate, yaw_rate, z_twist
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     DROP_Z,
@@ -58,6 +58,7 @@ __all__ = [
     "FRAME_SKIP",
     "MAX_FORCE",
     "N_OBS",
+    "N_PRIVILEGED",
     "OBJECTS",
     "OUT_RADIUS",
     "SOLVERS",

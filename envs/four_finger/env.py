@@ -35,6 +35,14 @@ With ``history=k`` (default 1) the observation is the last ``k`` such frames, ol
 its last few readings knows, enough to sense slip and the object's response (velocities)
 that one frame does not show.
 
+With ``privileged=True`` :data:`N_PRIVILEGED` (18) entries follow the frames, for an
+asymmetric critic only (the actor of ``train.ppo --privileged-critic`` never reads them;
+a tactile hand does not sense them): the object's position (3, m) and orientation
+quaternion (4, wxyz) in the palm frame, its free joint's velocity (6: linear m/s in the
+world frame, angular rad/s in the body frame, MuJoCo's ``qvel``), and the episode's
+physics: friction, torsional friction and mass scales, mean servo gain scale, latency
+(policy steps). Bounds: +-0.25 m, +-1, +-20 (clipped), [0, 5], [0, 5].
+
 Link ``k`` (0-7, order of :data:`CONTACT_LINKS`) fills ``24 + 4k .. 27 + 4k``: the
 mean position of that link's contacts with the object and the sum of their
 normal forces (the hand pushing on the object, ``c_n >= 0``; MuJoCo's elliptic
@@ -125,6 +133,7 @@ from ihm.hands import four_finger as ff
 __all__ = ["HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
 
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
+N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
 HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
 
 
@@ -182,6 +191,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
     grasps : start-grasp set, ``"train"`` or ``"test"`` (held out).
     n_grasps : size of the starting-state cache.
+    privileged : append the critic's privileged state to the observation (module doc).
     grip : how the start grasps squeeze, ``"nominal"`` (the thesis' inward grip) or
         ``"firm"`` (also lifting the object and 1 N harder, verified to hold still under
         the worst randomised physics): :data:`envs.four_finger.cache.GRIPS`.
@@ -226,6 +236,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         solver: str = "pgs",
         torsional: bool = True,
         history: int = 1,
+        privileged: bool = False,
     ) -> None:
         scene_name(object)
         if not isinstance(history, (int, np.integer)) or history < 1:
@@ -293,9 +304,16 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self._lo, self._hi = lo.astype(np.float32), hi.astype(np.float32)
         self.history = int(history)
-        self.observation_space = spaces.Box(
-            np.tile(self._lo, self.history), np.tile(self._hi, self.history)
+        self.privileged = bool(privileged)
+        self._priv_hi = np.repeat(np.float32([0.25, 1.0, 20.0, 5.0]), [3, 4, 6, 5])
+        self._priv_lo = np.where(np.arange(N_PRIVILEGED) < 13, -self._priv_hi, 0.0).astype(
+            np.float32
         )
+        lo, hi = np.tile(self._lo, self.history), np.tile(self._hi, self.history)
+        if self.privileged:
+            lo, hi = np.concatenate([lo, self._priv_lo]), np.concatenate([hi, self._priv_hi])
+        self.observation_space = spaces.Box(lo, hi)
+        self._obj_dof = int(self.model.jnt_dofadr[self.model.joint("object").id])
         self._frames = np.zeros((self.history, N_OBS), dtype=np.float32)
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._quat = np.zeros(4)
@@ -346,16 +364,30 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def _stacked(self, frame: NDArray[np.float32], first: bool = False) -> NDArray[np.float32]:
         """The returned observation: the last ``history`` sensed frames, oldest first (at a
-        reset every slot holds the first frame); the frame itself when ``history`` is 1."""
+        reset every slot holds the first frame); the frame itself when ``history`` is 1;
+        followed by :meth:`privileged_state` with ``privileged``."""
         if self.history == 1:
-            return frame
-        f = self._frames
-        if first:
-            f[:] = frame
+            out = frame
         else:
-            f[:-1] = f[1:]
-            f[-1] = frame
-        return f.reshape(-1).copy()
+            f = self._frames
+            if first:
+                f[:] = frame
+            else:
+                f[:-1] = f[1:]
+                f[-1] = frame
+            out = f.reshape(-1).copy()
+        return np.concatenate([out, self.privileged_state()]) if self.privileged else out
+
+    def privileged_state(self) -> NDArray[np.float32]:
+        """What the critic alone may see (module doc, ``privileged=True``)."""
+        ph = self.physics
+        s = self.scaler.current if self.scaler is not None else None
+        phys = (1.0, 1.0, 1.0, 1.0, 0.0)
+        if s is not None:
+            phys = (s.friction, s.torsional, s.mass, float(np.mean(s.gain)), float(s.latency))
+        v = self.data.qvel[self._obj_dof : self._obj_dof + 6]
+        out = np.concatenate([ph.object_pos(), ph.object_quat(), v, phys]).astype(np.float32)
+        return np.minimum(np.maximum(out, self._priv_lo), self._priv_hi)
 
     def _sag(self) -> float:
         """How far the object's centre sits below ``HOLD_Z``, as a fraction of the way down to
