@@ -26,7 +26,9 @@ Writes ``eval_heldout.json`` and, with ``--corners``, ``robustness.csv`` (one ro
 of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with ``--factors``
 ``factors.csv`` (one factor at a time, :func:`factors`) to ``--out`` (default: the policy
 directory). ``--grip firm`` starts every episode from the firm-grip test grasps
-(:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on.
+(:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on; ``--still`` holds
+the hand still (zero actions) instead of running the policy: the drops are then the start
+grasps' own.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from train.policy import SHIPPED, load_policy
 from train.rotation import MAX_DROP_RATE, TARGET_SPEED
 from train.stats import wilson_interval
 
-__all__ = ["evaluate_heldout", "held_grasps", "main", "robustness", "summarize"]
+__all__ = ["evaluate_heldout", "held_grasps", "main", "robustness", "still", "summarize"]
 
 TEST_GRASPS = 100  # size of the held-out start-grasp set
 
@@ -174,13 +176,22 @@ def factors(r: Randomization | None = None) -> list[PhysicsSample]:
     ]
 
 
-def _corner_job(args: tuple[str, PhysicsSample, int, float, bool, str | None]) -> dict[str, Any]:
-    policy_dir, physics, episodes, seconds, screen, grip = args
+def still(obs: np.ndarray) -> np.ndarray:
+    """The hand held still: zero actions for a batch of observations (``--still``)."""
+    return np.zeros((len(obs), 12), dtype=np.float32)
+
+
+def _load(policy_dir: Path, grip: str | None, hold_still: bool) -> tuple[Callable, dict]:
     import torch
 
     torch.set_num_threads(1)
     act, kw = load_policy(Path(policy_dir))
-    kw = kw if grip is None else {**kw, "grip": grip}
+    return (still if hold_still else act), (kw if grip is None else {**kw, "grip": grip})
+
+
+def _corner_job(args: tuple[str, PhysicsSample, int, float, bool, str | None, bool]) -> dict:
+    policy_dir, physics, episodes, seconds, screen, grip, hold_still = args
+    act, kw = _load(Path(policy_dir), grip, hold_still)
     res = evaluate_heldout(act, kw, episodes, seconds, physics=physics)
     res.pop("grasps")
     row = {"corner": physics.label(), **res}
@@ -205,14 +216,16 @@ def robustness(
     single: bool = False,
     screen: bool = False,
     grip: str | None = None,
+    hold_still: bool = False,
 ) -> list[dict[str, Any]]:
     """:func:`evaluate_heldout` at every corner of ``randomization`` (default: the env's
     :class:`Randomization`; ``single``: at each of its :func:`factors` instead), ``episodes``
     per case, ``workers`` processes; ``screen``: also from screened start grasps
     (``screened_*`` and ``unheld_starts`` columns; module doc); ``grip``: start grasps of
-    that grip instead of the policy's own (:data:`envs.four_finger.GRIPS`)."""
+    that grip instead of the policy's own (:data:`envs.four_finger.GRIPS`); ``hold_still``:
+    zero actions instead of the policy (:func:`still`: which start grasps hold by themselves)."""
     cases = corners(randomization) if not single else factors(randomization)
-    jobs = [(str(policy_dir), c, episodes, seconds, screen, grip) for c in cases]
+    jobs = [(str(policy_dir), c, episodes, seconds, screen, grip, hold_still) for c in cases]
     if workers <= 1:
         return [_corner_job(j) for j in jobs]
     with ProcessPoolExecutor(workers) as pool:
@@ -239,16 +252,23 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         default=None,
         help="start grasps of this grip instead of the policy's own (nominal or firm)",
     )
+    p.add_argument(
+        "--still",
+        action="store_true",
+        help="zero actions instead of the policy (the policy's object and env settings): which "
+        "start grasps hold with the hand still",
+    )
     p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
     a = p.parse_args(argv)
     if not 1 <= a.episodes <= TEST_GRASPS or a.corner_episodes < 1 or a.seconds <= 0:
         p.error(f"--episodes must be in [1, {TEST_GRASPS}], --corner-episodes >= 1, --seconds > 0")
+    if a.still and not a.out:
+        p.error("--still needs --out (it would overwrite the policy's own evaluation files)")
     policy = Path(a.policy)
     out = Path(a.out) if a.out else policy
     out.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("MUJOCO_GL", "egl")
-    act, kw = load_policy(policy)
-    kw = kw if a.grip is None else {**kw, "grip": a.grip}
+    act, kw = _load(policy, a.grip, a.still)
     res = evaluate_heldout(act, kw, a.episodes, a.seconds)
     (out / "eval_heldout.json").write_text(json.dumps(res, indent=2) + "\n")
     print(_line(f"{policy} nominal", res))
@@ -264,6 +284,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             single=single,
             screen=a.screen,
             grip=a.grip,
+            hold_still=a.still,
         )
         cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
         if a.screen:

@@ -89,3 +89,25 @@ def test_factors_change_one_thing_at_a_time() -> None:
         changed = [k for k in ("friction", "torsional", "mass", "gain", "latency", "noise")
                    if getattr(s, k) != getattr(nominal, k)]  # fmt: skip
         assert len(changed) == 1, s
+
+
+def test_still_hand_counts_the_start_grasps_own_drops(tmp_path) -> None:
+    """``--still``: zero actions instead of the policy; the object does not turn, the nominal
+    grip's first test grasps drop at the worst corners (grasp 0 within 0.1 s), the firm grip's
+    hold at all 16 (``--grip firm``), and ``--still`` without ``--out`` is refused."""
+    from train.heldout import main
+    from train.policy import SHIPPED
+
+    common = ["--still", "--corners", "--corner-episodes", "3", "--episodes", "3"]
+    common += ["--seconds", "2", "--workers", "1"]
+    res = main([str(SHIPPED), *common, "--out", str(tmp_path / "n")])
+    assert abs(res["nominal"]["speed_rad_s"]) < 0.05
+    worst = [
+        r for r in res["corners"] if "friction x0.5" in r["corner"] and "mass x2" in r["corner"]
+    ]
+    assert len(worst) == 4 and all(r["drops"] >= 1 for r in worst if "gain x0.8" in r["corner"])
+    firm = main([str(SHIPPED), *common, "--grip", "firm", "--out", str(tmp_path / "f")])
+    assert [r["drops"] for r in firm["corners"]] == [0] * 16
+    assert (tmp_path / "f" / "robustness.csv").is_file()
+    with pytest.raises(SystemExit):
+        main([str(SHIPPED), "--still"])
