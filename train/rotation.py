@@ -186,6 +186,9 @@ class RotateConfig:
     height_weight: float = opt(
         1.0, "weight of the env's height term (penalises the object sagging below 0.07 m)"
     )
+    slip_weight: float = opt(
+        0.0, "weight of the contact-slip penalty (mean sliding speed of the contacts [m/s])"
+    )
     rotation_cap: float = opt(
         1.0, "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
     )
@@ -331,6 +334,7 @@ def make_env(
             drop_weight=cfg.drop_weight,
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
+            slip_weight=cfg.slip_weight,
             history=cfg.history,
             privileged=cfg.privileged_critic,
             grip=cfg.grip,

@@ -159,6 +159,7 @@ FINETUNE = (
     "rotation_cap",
     "drop_weight",
     "height_weight",
+    "slip_weight",
     "checkpoint_every",
     "eval_episodes",
     "grip",

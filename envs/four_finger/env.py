@@ -58,7 +58,7 @@ state (the observation is not Markov).
 
 ## Rewards
 
-``reward = rotation + drop + action + height`` with every term in ``info``:
+``reward = rotation + drop + action + height + slip`` with every term in ``info``:
 
 - ``rotation``: the object's mean angular velocity about the world +z axis over
   the policy step, ``[log(R_t R_{t-1}^T)]_z / dt`` [rad/s] (positive:
@@ -71,7 +71,10 @@ state (the observation is not Markov).
   below ``HOLD_Z`` (0.07 m; the start grasps hold it at about 0.077 m) as a fraction of the way
   to the drop threshold ``DROP_Z`` (default weight 0). Without it, trained policies carried
   the sphere in a low two-finger pinch 2-10 mm above the drop threshold, where a small sag
-  ends the episode (docs/four_finger.md).
+  ends the episode (docs/four_finger.md);
+- ``slip``: ``-slip_weight * v_slip``, the mean tangential sliding speed [m/s] of the
+  finger-object contacts at the end of the step (``Physics.object_slip``; default weight 0):
+  a sliding contact's friction acts along the slip, so it holds less against the weight.
 
 ## Episode End
 
@@ -185,7 +188,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     max_setpoint_step : ``q^max`` of the thesis [rad per policy step].
     frame_skip : physics substeps per policy step.
     timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
-    drop_weight, action_weight : weights of the optional reward terms (module doc).
+    drop_weight, action_weight, slip_weight : weights of the optional reward terms
+        (module doc).
     rotation_cap : bound of the rotation reward [rad/s] (``inf``: none).
     randomize : a :class:`~envs.four_finger.randomize.Randomization` drawn at every reset, or
         ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
@@ -223,6 +227,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         drop_weight: float = 0.0,
         action_weight: float = 0.0,
         height_weight: float = 0.0,
+        slip_weight: float = 0.0,
         rotation_cap: float = math.inf,
         randomize: Randomization | None = None,
         physics: PhysicsSample | None = None,
@@ -249,6 +254,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             ("drop_weight", drop_weight),
             ("action_weight", action_weight),
             ("height_weight", height_weight),
+            ("slip_weight", slip_weight),
         ):
             if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -279,6 +285,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.drop_weight = float(drop_weight)
         self.action_weight = float(action_weight)
         self.height_weight = float(height_weight)
+        self.slip_weight = float(slip_weight)
         self.rotation_cap = float(rotation_cap)
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
@@ -450,8 +457,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "drop": -self.drop_weight if dropped else 0.0,
             "action": -self.action_weight * float(a @ a) / ff.NU,
             "height": -self.height_weight * self._sag(),
+            "slip": -self.slip_weight * ph.object_slip() if self.slip_weight else 0.0,
         }
-        reward = terms["rotation"] + terms["drop"] + terms["action"] + terms["height"]
+        reward = sum(terms.values())
         info = {
             **terms,
             "dropped": dropped,

@@ -19,6 +19,7 @@ same contacts in the same order with the same parameters, hence the same motion 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import mujoco
@@ -231,6 +232,28 @@ class Physics:
     def dropped(self) -> bool:
         p = self.object_pos()
         return bool(p[2] < DROP_Z or p[0] * p[0] + p[1] * p[1] > OUT_RADIUS * OUT_RADIUS)
+
+    def object_slip(self) -> float:
+        """Mean tangential sliding speed [m/s] of the finger-object contacts: ``|(v_t1, v_t2)|``
+        of each contact's tangential constraint rows of ``efc_vel`` (the relative velocity of
+        the two bodies at the contact point in the contact frame, from the last substep), 0
+        without such a contact."""
+        d = self.data
+        if d.ncon == 0:
+            return 0.0
+        c = d.contact
+        geom, adr, excl = c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist()
+        v = d.efc_vel
+        slot, is_obj = self.slot, self.is_obj
+        total, n = 0.0, 0
+        for i, (g1, g2) in enumerate(geom):
+            s = slot[g1] if is_obj[g2] else slot[g2] if is_obj[g1] else -1
+            a = adr[i]
+            if s < 0 or a < 0 or excl[i]:
+                continue
+            total += math.hypot(v[a + 1], v[a + 2])
+            n += 1
+        return total / n if n else 0.0
 
     def link_contacts(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
         """Per observed link: mean contact position (8, 3) [m], normal force sum (8,) [N], and
