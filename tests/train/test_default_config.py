@@ -28,7 +28,7 @@ def test_readme_states_the_default_configuration() -> None:
         f"| object | `{u.object}`, gravity {'on' if u.gravity else 'off'} |",
         f"| training episode | {steps} steps ({steps * POLICY_DT:g} s) |",
         f"| reward | rotation about +z [rad/s], {cap}; height term weight {u.height_weight:g}; "
-        f"drop penalty {u.drop_weight:g} |",
+        f"drop penalty {u.drop_weight:g}; slip penalty {u.slip_weight:g} |",
         f"| physics | {physics} |",
         f"| budget | {cfg.total_steps:,} env steps |",
         f"| nets | policy {_nets(cfg.pi)}, value {_nets(cfg.vf)} |",
