@@ -182,15 +182,15 @@ def still(obs: np.ndarray) -> np.ndarray:
 
 
 def _load(policy_dir: Path, grip: str | None, hold_still: bool) -> tuple[Callable, dict]:
-    import torch
-
-    torch.set_num_threads(1)
     act, kw = load_policy(Path(policy_dir))
     return (still if hold_still else act), (kw if grip is None else {**kw, "grip": grip})
 
 
 def _corner_job(args: tuple[str, PhysicsSample, int, float, bool, str | None, bool]) -> dict:
     policy_dir, physics, episodes, seconds, screen, grip, hold_still = args
+    import torch
+
+    torch.set_num_threads(1)
     act, kw = _load(Path(policy_dir), grip, hold_still)
     res = evaluate_heldout(act, kw, episodes, seconds, physics=physics)
     res.pop("grasps")

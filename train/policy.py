@@ -50,8 +50,7 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
-    keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1}
-    keys["grip"] = "nominal"
+    keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1, "grip": "nominal"}
     kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
     kwargs["privileged"] = bool(cfg.get("privileged_critic", False))
     return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}

@@ -548,7 +548,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     finetune = tuple(f for f in FINETUNE if given(argv, f)) if cfg.resume is not None else ()
     cfg, run_dir = open_run(cfg, name, keep=keep + finetune)
     grasp_cache(
-        cfg.object, cfg.gravity, **env_physics(cfg.timestep)
+        cfg.object, cfg.gravity, **env_physics(cfg.timestep), grip=cfg.grip
     )  # build the start-state cache once, before any worker
     done = saved_timesteps(run_dir) if cfg.resume is not None else 0
     if cfg.resume is not None and given(argv, "randomize") and not cfg.randomize:

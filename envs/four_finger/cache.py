@@ -59,6 +59,11 @@ FIRM_SQUEEZE = 1.0  # [N] firm grip: extra inward force per touching finger
 _GENERATOR_VERSION = 2  # bump when generate_grasps changes
 
 
+def _check_grip(grip: str) -> None:
+    if grip not in GRIPS:
+        raise FourFingerError(f"grip must be one of {list(GRIPS)}, got {grip!r}")
+
+
 def worst_hold(r: Randomization | None = None) -> PhysicsSample:
     """The physics under which a still hand holds worst: ``r``'s lowest friction and
     torsional friction, highest mass and lowest gain (no latency or noise: the hand is still).
@@ -121,8 +126,7 @@ def generate_grasps(
 
     Returns the first ``n`` kept grasps (their state before the check).
     """
-    if grip not in GRIPS:
-        raise FourFingerError(f"grip must be one of {list(GRIPS)}, got {grip!r}")
+    _check_grip(grip)
     scene = scene_name(obj)
     rng = np.random.default_rng(seed)
     ph = Physics(obj, gravity, timestep)
@@ -287,8 +291,7 @@ def grasp_cache(
     grip: str = "nominal",
 ) -> GraspCache:
     """:func:`generate_grasps`, memoised in the process and on disk (``$IHM_CACHE``)."""
-    if grip not in GRIPS:
-        raise FourFingerError(f"grip must be one of {list(GRIPS)}, got {grip!r}")
+    _check_grip(grip)
     key = _cache_key(obj, gravity, n, seed, timestep, frame_skip, grip)
     if key in _MEMORY:
         return _MEMORY[key]
