@@ -208,6 +208,11 @@ class RotateConfig:
         "with --randomize: probability that a training episode's physics is one of the 16 "
         "corners of the ranges (envs.four_finger.corners) instead of a uniform draw",
     )
+    hard_prob: float = opt(
+        0.0,
+        "with --randomize: probability that a training episode is drawn from the hard region "
+        "(friction x0.5, mass x1-2; envs.four_finger.Randomization.hard_prob)",
+    )
     validate_corners: int = opt(
         0,
         "with --randomize: also validate at each of the 16 corners, N episodes each; best/ is "
@@ -278,8 +283,10 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.privileged_critic and cfg.shield != "none":
         problems.append("--privileged-critic cannot be combined with a --shield")
-    if not 0.0 <= cfg.corner_prob <= 1.0 or cfg.validate_corners < 0:
-        problems.append("--corner-prob must be in [0, 1] and --validate-corners >= 0")
+    if not (0 <= cfg.corner_prob <= 1 and 0 <= cfg.hard_prob <= 1 - cfg.corner_prob):
+        problems.append("--corner-prob, --hard-prob and their sum must be in [0, 1]")
+    if cfg.validate_corners < 0:
+        problems.append("--validate-corners must be >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:
@@ -358,8 +365,9 @@ def make_env(
 
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
     """The training envs' randomised physics: the env's :class:`Randomization` with
-    ``cfg.corner_prob``, or ``None`` without ``--randomize``."""
-    return Randomization(corner_prob=cfg.corner_prob) if cfg.randomize else None
+    ``cfg.corner_prob`` and ``cfg.hard_prob``, or ``None`` without ``--randomize``."""
+    r = Randomization(corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob)
+    return r if cfg.randomize else None
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:

@@ -155,6 +155,7 @@ def start_randomizing(cfg: Any, run_dir: Path, done: int) -> Any:
 
 FINETUNE = (
     "corner_prob",
+    "hard_prob",
     "validate_corners",
     "rotation_cap",
     "drop_weight",

@@ -15,7 +15,11 @@ episode (at ``reset``) and :class:`ModelScaler` writes it into the ``MjModel``:
 Scales are drawn uniformly between the bounds (mass log-uniformly, so that x0.5 and x2 are
 equally likely). With ``corner_prob`` > 0, an episode is instead, with that probability, one
 of the :func:`corners` drawn uniformly (boundary sampling: the bounds, where a policy fails
-first, are drawn more often than a uniform draw would).
+first, are drawn more often than a uniform draw would). With ``hard_prob`` > 0 an episode is,
+with that probability, drawn from the hard region: friction at its lower bound, mass
+log-uniform in the upper half of its range (nominal to heaviest), torsional friction and
+gains uniform (where the shipped sphere policies drop: half the friction at the nominal mass
+and above, docs/four_finger.md).
 
 The servo's torque limit (``forcerange`` 0.5 N m) is the motor's and is not scaled.
 Setpoints (``data.ctrl``) are the controller's own numbers and are not noisy; contact slots
@@ -53,6 +57,7 @@ class Randomization:
     noise_pos: float = 0.001  # [m] std of contact position noise
     noise_force: float = 0.05  # [N] std of normal force noise
     corner_prob: float = 0.0  # probability that an episode is one of the corners()
+    hard_prob: float = 0.0  # probability that an episode is drawn from the hard region
 
     def __post_init__(self) -> None:
         for name in ("friction", "torsional", "mass", "gain"):
@@ -61,10 +66,14 @@ class Randomization:
                 raise FourFingerError(
                     f"randomization {name} range must be 0 < low <= high, got {(lo, hi)}"
                 )
-        for name in ("latency_prob", "corner_prob"):
+        for name in ("latency_prob", "corner_prob", "hard_prob"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise FourFingerError(f"{name} must be in [0, 1], got {v}")
+        if self.corner_prob + self.hard_prob > 1.0:
+            raise FourFingerError(
+                f"corner_prob + hard_prob must be <= 1, got {self.corner_prob + self.hard_prob}"
+            )
         for name in ("noise_joint", "noise_pos", "noise_force"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -72,13 +81,19 @@ class Randomization:
 
     def sample(self, rng: np.random.Generator, nu: int) -> PhysicsSample:
         """One episode's physics: with probability ``corner_prob`` one of :func:`corners`
-        (each equally likely), else the uniform draw of the module doc."""
-        if self.corner_prob > 0 and rng.uniform() < self.corner_prob:
-            cs = corners(self)
-            return cs[int(rng.integers(len(cs)))]
+        (each equally likely), with probability ``hard_prob`` a draw from the hard region,
+        else the uniform draw of the module doc."""
         lo, hi = np.log(self.mass)
+        friction = self.friction
+        if self.corner_prob > 0 or self.hard_prob > 0:
+            u = rng.uniform()
+            if u < self.corner_prob:
+                cs = corners(self)
+                return cs[int(rng.integers(len(cs)))]
+            if u < self.corner_prob + self.hard_prob:
+                friction, lo = (self.friction[0], self.friction[0]), max(lo, min(0.0, hi))
         return PhysicsSample(
-            friction=float(rng.uniform(*self.friction)),
+            friction=float(rng.uniform(*friction)),
             torsional=float(rng.uniform(*self.torsional)),
             mass=float(np.exp(rng.uniform(lo, hi))),
             gain=tuple(float(g) for g in rng.uniform(*self.gain, nu)),

@@ -267,6 +267,49 @@ def test_corner_prob_draws_corners_at_the_stated_rate() -> None:
         )
 
 
+def test_hard_prob_draws_the_hard_region_at_the_stated_rate() -> None:
+    """``hard_prob`` 1 draws friction at its lower bound and the mass log-uniformly between
+    nominal and the heaviest (about half of them above sqrt(2), 4.5 sigma), torsional friction
+    and gains still spread over their ranges; with ``corner_prob`` 0.3 and ``hard_prob`` 0.4
+    the three kinds come at 0.3 / 0.4 / 0.3 (4.5 sigma); a sum above 1 is refused; 0 leaves
+    the uniform stream as it was. In the env the friction and mass are read back from the
+    model."""
+    cs = set(corners())
+    rng = np.random.default_rng(0)
+    draws = [Randomization(hard_prob=1.0).sample(rng, ff.NU) for _ in range(400)]
+    assert {d.friction for d in draws} == {0.5}
+    masses = np.array([d.mass for d in draws])
+    assert masses.min() >= 1.0 and masses.max() <= 2.0
+    assert abs((masses > math.sqrt(2)).sum() - 200) < 4.5 * math.sqrt(100)
+    tors = np.array([d.torsional for d in draws])
+    gains = np.array([d.gain for d in draws])
+    assert tors.min() < 0.6 and tors.max() > 1.4 and gains.min() < 0.81 and gains.max() > 1.19
+    rng = np.random.default_rng(1)
+    r = Randomization(corner_prob=0.3, hard_prob=0.4)
+    kinds = np.zeros(3)
+    for _ in range(1000):
+        d = r.sample(rng, ff.NU)
+        kinds[0 if d in cs else 1 if d.friction == 0.5 and d.mass >= 1.0 else 2] += 1
+    for k, p in zip(kinds, (0.3, 0.4, 0.3), strict=True):
+        assert abs(k - 1000 * p) < 4.5 * math.sqrt(1000 * p * (1 - p))
+    with pytest.raises(FourFingerError, match="corner_prob \\+ hard_prob"):
+        Randomization(corner_prob=0.6, hard_prob=0.5)
+    with pytest.raises(FourFingerError, match="hard_prob"):
+        Randomization(hard_prob=-0.1)
+    a = [Randomization().sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
+    b = [Randomization(hard_prob=0.0).sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
+    assert a == b
+    env = FourFingerRotate(randomize=Randomization(hard_prob=1.0))
+    m0 = FourFingerRotate().model
+    p, body = env.scaler.obj_pairs, env.scaler.obj_body
+    for k in range(4):
+        env.reset(seed=k)
+        np.testing.assert_allclose(env.model.pair_friction[p, 0], 0.5 * m0.pair_friction[p, 0])
+        ratio = env.model.body_mass[body] / m0.body_mass[body]
+        assert 1.0 <= ratio <= 2.0
+        assert ratio == pytest.approx(env.scaler.current.mass)
+
+
 def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
     """``height = -w * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` of the object's centre after the
     step: 0 for a grasp held high, -w/2 halfway down, and part of the reward."""

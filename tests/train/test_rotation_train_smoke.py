@@ -125,11 +125,12 @@ def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> No
 
 
 def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> None:
-    """``--resume RUN --randomize --corner-prob P --validate-corners N --grip firm``:
-    config.json records the fine-tune (and the policy loads with the firm start grasps),
-    eval.csv gains the pooled corner figures (16 corners x N episodes), the earlier ``best/``
-    moves aside (``best_nominal/``) and the new ``best/`` is ranked on the worse of nominal
-    and corners. ``--init-from RUN --object cube`` starts a new run from the run's weights
+    """``--resume RUN --randomize --corner-prob P --hard-prob Q --validate-corners N --grip
+    firm``: config.json records the fine-tune (the training envs draw the hard region with
+    probability Q; a sum of P and Q above 1 is refused; the policy loads with the firm start
+    grasps), eval.csv gains the pooled corner figures (16 corners x N episodes), the earlier
+    ``best/`` moves aside (``best_nominal/``) and the new ``best/`` is ranked on the worse of
+    nominal and corners. ``--init-from RUN --object cube`` starts a new run from the run's weights
     (equal before training); nets that do not match are refused by name."""
     import torch
     from stable_baselines3 import PPO
@@ -146,10 +147,18 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     q = _train_ppo(
         "--resume", str(run_dir), "--randomize", "--corner-prob", "0.5", "--validate-corners",
         "1", "--total-steps", "128", "--no-progress", "--workers", "0", "--grip", "firm",
+        "--hard-prob", "0.25",
     )  # fmt: skip
     assert q.returncode == 0, q.stderr[-2000:]
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["randomize"] and cfg["corner_prob"] == 0.5 and cfg["validate_corners"] == 1
+    from train.rotation import RotateConfig, parse_config, training_randomization
+
+    assert cfg["hard_prob"] == 0.25
+    r = training_randomization(RotateConfig(**{k: cfg[k] for k in ("randomize", "hard_prob")}))
+    assert r is not None and (r.corner_prob, r.hard_prob) == (0.0, 0.25)
+    with pytest.raises(SystemExit):
+        parse_config(["--corner-prob", "0.6", "--hard-prob", "0.5"])
     from train.policy import load_policy
 
     assert cfg["grip"] == "firm" and load_policy(run_dir)[1]["grip"] == "firm"
