@@ -61,6 +61,7 @@ from envs.four_finger import (
 from shields import GraspShield
 from shields.qp import BACKENDS
 from stability.io import write_csv
+from train.curves import monitor_returns, plot_curve, steps_label
 from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
 from train.runfiles import (
@@ -456,7 +457,7 @@ class EvalCallback(BaseCallback):
         )
         self.logger.record("eval/speed_rad_s", res["speed_rad_s"])
         self.logger.record("eval/drop_rate", res["drop_rate"])
-        plot_curve(self.run_dir)
+        plot_curve(self.run_dir, TARGET_SPEED)
         if self.cfg.keep_best and (
             self.best is None
             or validation_key(rank) > validation_key(self.best.get("ranked_on", self.best))
@@ -472,77 +473,6 @@ class EvalCallback(BaseCallback):
             shutil.copy(self.run_dir / "config.json", best / "config.json")
             (best / "eval.json").write_text(json.dumps(self.best, indent=2) + "\n")
         return res
-
-
-def monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(cumulative env steps at each episode end, episode return) over all monitor files, in
-    wall-time order."""
-    rows = []
-    for p in sorted((run_dir / "monitor").glob("*.monitor.csv")):
-        with p.open() as f:
-            lines = [ln for ln in f if not ln.startswith("#")]
-        for r in csv.DictReader(lines):
-            rows.append((float(r["t"]), float(r["r"]), int(r["l"])))
-    if not rows:
-        return np.zeros(0), np.zeros(0)
-    rows.sort()
-    t, r, length = (np.array(c) for c in zip(*rows, strict=True))
-    return np.cumsum(length), r
-
-
-def steps_label(x: float) -> str:
-    """A step count for an axis: ``0``, ``500``, ``100k``, ``1.6M``."""
-    if abs(x) >= 1e6:
-        return f"{x / 1e6:g}M"
-    if abs(x) >= 1e3:
-        return f"{x / 1e3:g}k"
-    return f"{x:g}"
-
-
-def plot_curve(run_dir: Path, out: Path | None = None) -> Path:
-    """curve.png: training episode return (64-step episodes, smoothed) and the evaluated
-    rotation speed and drop rate over env steps; the dotted line is the speed target of
-    :data:`TARGET_SPEED` (issue 11: >= 0.5 rad/s over 20 s episodes, <= 5 % drops)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter, MaxNLocator
-
-    steps, ret = monitor_returns(run_dir)
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-    if len(ret):
-        w = max(1, min(200, len(ret) // 20))
-        smooth = np.convolve(ret, np.ones(w) / w, mode="valid")
-        ax[0].plot(steps, ret, ".", ms=1, alpha=0.15, color="C0")
-        ax[0].plot(steps[w - 1 :], smooth, color="C0", label=f"mean of {w} episodes")
-        ax[0].legend(loc="lower right")
-    ax[0].set_xlabel("env steps")
-    ax[0].set_ylabel("training episode return [rad/s summed over 64 steps]")
-    ax[0].set_title("training return")
-    ev = run_dir / "eval.csv"
-    if ev.is_file():
-        with ev.open() as f:
-            rows = list(csv.DictReader(f))
-        if rows:
-            x = [int(r["steps"]) for r in rows]
-            ax[1].plot(x, [float(r["speed_rad_s"]) for r in rows], "o-", label="speed [rad/s]")
-            ax[1].plot(x, [float(r["drop_rate"]) for r in rows], "s--", label="drop rate")
-            ax[1].axhline(
-                TARGET_SPEED, color="gray", lw=0.8, ls=":", label="target speed (>= 0.5 rad/s)"
-            )
-            ax[1].legend(loc="upper left")
-    ax[1].set_xlabel("env steps")
-    ax[1].set_title("evaluation: deterministic policy, 20 s episodes")
-    for a in ax:
-        a.grid(alpha=0.3)
-        a.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))
-        a.xaxis.set_major_formatter(FuncFormatter(lambda x, _: steps_label(x)))
-    fig.tight_layout()
-    out = out or run_dir / "curve.png"
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
@@ -631,7 +561,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "best": ev.best,
     }
     (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    plot_curve(run_dir)
+    plot_curve(run_dir, TARGET_SPEED)
     vec.close()
     for env in [*eval_envs, *corner_envs]:
         env.close()

@@ -11,7 +11,7 @@ import pytest
 from stable_baselines3.common.callbacks import BaseCallback
 
 from train import islands_ppo
-from train.rotation import plot_curve, steps_label
+from train.curves import plot_curve, steps_label
 from train.sb3 import TqdmProgress, progress_bar, seed_everything
 from train.seeding import RunSeeds
 
@@ -91,5 +91,5 @@ def test_curve_step_labels_are_short(tmp_path: Path) -> None:
     (tmp_path / "monitor" / "0.monitor.csv").write_text("\n".join(lines) + "\n")
     (tmp_path / "eval.csv").write_text("steps,speed_rad_s,drop_rate,episodes,wall_s\n"
                                        "1600,0.4,0.1,2,1.0\n3200,0.6,0.0,2,2.0\n")  # fmt: skip
-    out = plot_curve(tmp_path)
+    out = plot_curve(tmp_path, 0.5)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
