@@ -214,6 +214,11 @@ class RotateConfig:
         "with --randomize: probability that a training episode is drawn from the hard region "
         "(friction x0.5, mass x1-2; envs.four_finger.Randomization.hard_prob)",
     )
+    hard_gain: float = opt(
+        1.2,
+        "with --hard-prob: upper bound of the servo gain scales in the hard region (1.2: the "
+        "whole range x0.8-1.2; 1.0: the weak half)",
+    )
     validate_corners: int = opt(
         0,
         "with --randomize: also validate at each of the 16 corners, N episodes each; best/ is "
@@ -286,8 +291,8 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         problems.append("--privileged-critic cannot be combined with a --shield")
     if not (0 <= cfg.corner_prob <= 1 and 0 <= cfg.hard_prob <= 1 - cfg.corner_prob):
         problems.append("--corner-prob, --hard-prob and their sum must be in [0, 1]")
-    if cfg.validate_corners < 0:
-        problems.append("--validate-corners must be >= 0")
+    if cfg.validate_corners < 0 or not cfg.hard_gain >= (low := Randomization().gain[0]):
+        problems.append(f"--validate-corners must be >= 0 and --hard-gain >= {low:g}")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:
@@ -367,7 +372,7 @@ def make_env(
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
     """The training envs' randomised physics: the env's :class:`Randomization` with
     ``cfg.corner_prob`` and ``cfg.hard_prob``, or ``None`` without ``--randomize``."""
-    r = Randomization(corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob)
+    r = Randomization(corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob, hard_gain=cfg.hard_gain)
     return r if cfg.randomize else None
 
 

@@ -156,6 +156,7 @@ def start_randomizing(cfg: Any, run_dir: Path, done: int) -> Any:
 FINETUNE = (
     "corner_prob",
     "hard_prob",
+    "hard_gain",
     "validate_corners",
     "rotation_cap",
     "drop_weight",

@@ -17,9 +17,10 @@ equally likely). With ``corner_prob`` > 0, an episode is instead, with that prob
 of the :func:`corners` drawn uniformly (boundary sampling: the bounds, where a policy fails
 first, are drawn more often than a uniform draw would). With ``hard_prob`` > 0 an episode is,
 with that probability, drawn from the hard region: friction at its lower bound, mass
-log-uniform in the upper half of its range (nominal to heaviest), torsional friction and
-gains uniform (where the shipped sphere policies drop: half the friction at the nominal mass
-and above, docs/four_finger.md).
+log-uniform in the upper half of its range (nominal to heaviest), torsional friction
+uniform and each servo gain uniform between the range's lower bound and ``hard_gain``
+(default: the whole range; 1: the weak half): where the sphere policies drop (half the
+friction at the nominal mass and above, worst with weak servos; docs/four_finger.md).
 
 The servo's torque limit (``forcerange`` 0.5 N m) is the motor's and is not scaled.
 Setpoints (``data.ctrl``) are the controller's own numbers and are not noisy; contact slots
@@ -33,6 +34,7 @@ mass and gain, each with latency and noise at their maxima: the robustness table
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field
 
 import mujoco
@@ -58,6 +60,7 @@ class Randomization:
     noise_force: float = 0.05  # [N] std of normal force noise
     corner_prob: float = 0.0  # probability that an episode is one of the corners()
     hard_prob: float = 0.0  # probability that an episode is drawn from the hard region
+    hard_gain: float = math.inf  # upper bound of the gains in the hard region (inf: gain[1])
 
     def __post_init__(self) -> None:
         for name in ("friction", "torsional", "mass", "gain"):
@@ -70,6 +73,8 @@ class Randomization:
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise FourFingerError(f"{name} must be in [0, 1], got {v}")
+        if not self.hard_gain >= self.gain[0]:
+            raise FourFingerError(f"hard_gain must be >= {self.gain[0]}, got {self.hard_gain}")
         if self.corner_prob + self.hard_prob > 1.0:
             raise FourFingerError(
                 f"corner_prob + hard_prob must be <= 1, got {self.corner_prob + self.hard_prob}"
@@ -84,7 +89,7 @@ class Randomization:
         (each equally likely), with probability ``hard_prob`` a draw from the hard region,
         else the uniform draw of the module doc."""
         lo, hi = np.log(self.mass)
-        friction = self.friction
+        friction, gain = self.friction, self.gain
         if self.corner_prob > 0 or self.hard_prob > 0:
             u = rng.uniform()
             if u < self.corner_prob:
@@ -92,11 +97,12 @@ class Randomization:
                 return cs[int(rng.integers(len(cs)))]
             if u < self.corner_prob + self.hard_prob:
                 friction, lo = (self.friction[0], self.friction[0]), max(lo, min(0.0, hi))
+                gain = (self.gain[0], min(self.hard_gain, self.gain[1]))
         return PhysicsSample(
             friction=float(rng.uniform(*friction)),
             torsional=float(rng.uniform(*self.torsional)),
             mass=float(np.exp(rng.uniform(lo, hi))),
-            gain=tuple(float(g) for g in rng.uniform(*self.gain, nu)),
+            gain=tuple(float(g) for g in rng.uniform(*gain, nu)),
             latency=int(rng.uniform() < self.latency_prob),
             noise=(self.noise_joint, self.noise_pos, self.noise_force),
         )

@@ -272,8 +272,8 @@ def test_hard_prob_draws_the_hard_region_at_the_stated_rate() -> None:
     nominal and the heaviest (about half of them above sqrt(2), 4.5 sigma), torsional friction
     and gains still spread over their ranges; with ``corner_prob`` 0.3 and ``hard_prob`` 0.4
     the three kinds come at 0.3 / 0.4 / 0.3 (4.5 sigma); a sum above 1 is refused; 0 leaves
-    the uniform stream as it was. In the env the friction and mass are read back from the
-    model."""
+    the uniform stream as it was; ``hard_gain`` bounds the gains there. In the env the
+    friction and mass are read back from the model."""
     cs = set(corners())
     rng = np.random.default_rng(0)
     draws = [Randomization(hard_prob=1.0).sample(rng, ff.NU) for _ in range(400)]
@@ -296,6 +296,10 @@ def test_hard_prob_draws_the_hard_region_at_the_stated_rate() -> None:
         Randomization(corner_prob=0.6, hard_prob=0.5)
     with pytest.raises(FourFingerError, match="hard_prob"):
         Randomization(hard_prob=-0.1)
+    weak = Randomization(hard_prob=1.0, hard_gain=1.0).sample(np.random.default_rng(3), ff.NU)
+    assert 0.8 <= min(weak.gain) < max(weak.gain) <= 1.0  # ``hard_gain``: the weak half
+    with pytest.raises(FourFingerError, match="hard_gain"):
+        Randomization(hard_gain=0.7)
     a = [Randomization().sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
     b = [Randomization(hard_prob=0.0).sample(np.random.default_rng(2), ff.NU) for _ in range(3)]
     assert a == b
