@@ -32,7 +32,7 @@ import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +53,7 @@ from envs.four_finger import (
     N_PRIVILEGED,
     OBJECTS,
     TIMESTEP,
+    FourFingerError,
     PhysicsSample,
     Randomization,
     corners,
@@ -215,7 +216,7 @@ class RotateConfig:
         "(friction x0.5, mass x1-2; envs.four_finger.Randomization.hard_prob)",
     )
     hard_gain: float = opt(
-        1.2,
+        Randomization().gain[1],
         "with --hard-prob: upper bound of the servo gain scales in the hard region (1.2: the "
         "whole range x0.8-1.2; 1.0: the weak half)",
     )
@@ -289,10 +290,12 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.privileged_critic and cfg.shield != "none":
         problems.append("--privileged-critic cannot be combined with a --shield")
-    if not (0 <= cfg.corner_prob <= 1 and 0 <= cfg.hard_prob <= 1 - cfg.corner_prob):
-        problems.append("--corner-prob, --hard-prob and their sum must be in [0, 1]")
-    if cfg.validate_corners < 0 or not cfg.hard_gain >= (low := Randomization().gain[0]):
-        problems.append(f"--validate-corners must be >= 0 and --hard-gain >= {low:g}")
+    try:  # --corner-prob, --hard-prob, --hard-gain: the Randomization's own checks
+        training_randomization(replace(cfg, randomize=True))
+    except FourFingerError as e:
+        problems.append(f"--corner-prob, --hard-prob, --hard-gain: {e}")
+    if cfg.validate_corners < 0:
+        problems.append("--validate-corners must be >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:
@@ -372,8 +375,11 @@ def make_env(
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
     """The training envs' randomised physics: the env's :class:`Randomization` with
     ``cfg.corner_prob`` and ``cfg.hard_prob``, or ``None`` without ``--randomize``."""
-    r = Randomization(corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob, hard_gain=cfg.hard_gain)
-    return r if cfg.randomize else None
+    if not cfg.randomize:
+        return None
+    return Randomization(
+        corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob, hard_gain=cfg.hard_gain
+    )
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
