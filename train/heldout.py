@@ -28,7 +28,9 @@ of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with 
 directory). ``--grip firm`` starts every episode from the firm-grip test grasps
 (:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on; ``--still`` holds
 the hand still (zero actions) instead of running the policy: the drops are then the start
-grasps' own.
+grasps' own. ``--range-scale S`` (in (0, 1)) evaluates the corners and factors of the ranges
+shrunk towards nominal (:meth:`envs.four_finger.Randomization.scaled`) and names the files
+``robustness_xS.csv`` and ``factors_xS.csv``: a narrower stated range.
 """
 
 from __future__ import annotations
@@ -43,7 +45,14 @@ from typing import Any
 
 import numpy as np
 
-from envs.four_finger import GRIPS, FourFingerRotate, PhysicsSample, Randomization, corners
+from envs.four_finger import (
+    GRIPS,
+    FourFingerError,
+    FourFingerRotate,
+    PhysicsSample,
+    Randomization,
+    corners,
+)
 from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train.evaluation import RotationEpisode, run_episodes
@@ -258,8 +267,19 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         help="zero actions instead of the policy (the policy's object and env settings): which "
         "start grasps hold with the hand still",
     )
+    p.add_argument(
+        "--range-scale",
+        type=float,
+        default=1.0,
+        help="corners/factors of the ranges shrunk towards nominal by this factor in (0, 1] "
+        "(Randomization.scaled); files robustness_xS.csv, factors_xS.csv",
+    )
     p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
     a = p.parse_args(argv)
+    try:
+        ranges = Randomization().scaled(a.range_scale)
+    except FourFingerError as e:
+        p.error(f"--range-scale: {e}")
     if not 1 <= a.episodes <= TEST_GRASPS or a.corner_episodes < 1 or a.seconds <= 0:
         p.error(f"--episodes must be in [1, {TEST_GRASPS}], --corner-episodes >= 1, --seconds > 0")
     if a.still and not a.out:
@@ -280,6 +300,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             policy,
             a.corner_episodes,
             a.seconds,
+            randomization=ranges,
             workers=a.workers,
             single=single,
             screen=a.screen,
@@ -299,7 +320,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             {k: round(v, 4) if isinstance(v, float) else v for k, v in r.items() if k in cols}
             for r in rows
         ]
-        write_csv(out / ("robustness.csv" if name == "corners" else "factors.csv"), csv_rows, cols)
+        stem = "robustness" if name == "corners" else "factors"
+        tag = "" if a.range_scale == 1.0 else f"_x{a.range_scale:g}"
+        write_csv(out / f"{stem}{tag}.csv", csv_rows, cols)
         for r in rows:
             print(_line(r["corner"], r))
             if a.screen:

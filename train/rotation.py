@@ -220,6 +220,13 @@ class RotateConfig:
         "with --hard-prob: upper bound of the servo gain scales in the hard region (1.2: the "
         "whole range x0.8-1.2; 1.0: the weak half)",
     )
+    range_scale: float = opt(
+        1.0,
+        "with --randomize: shrink the friction, torsional, mass and gain ranges towards nominal "
+        "by this factor in (0, 1] (Randomization.scaled; 0.5: friction x0.75-1.25, mass "
+        "x0.71-1.41); latency and noise stay. A first curriculum stage; the corners validated "
+        "are the scaled range's",
+    )
     validate_corners: int = opt(
         0,
         "with --randomize: also validate at each of the 16 corners, N episodes each; best/ is "
@@ -290,10 +297,10 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.privileged_critic and cfg.shield != "none":
         problems.append("--privileged-critic cannot be combined with a --shield")
-    try:  # --corner-prob, --hard-prob, --hard-gain: the Randomization's own checks
+    try:  # --corner-prob, --hard-prob, --hard-gain, --range-scale: Randomization's own checks
         training_randomization(replace(cfg, randomize=True))
     except FourFingerError as e:
-        problems.append(f"--corner-prob, --hard-prob, --hard-gain: {e}")
+        problems.append(f"--corner-prob, --hard-prob, --hard-gain, --range-scale: {e}")
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
@@ -374,12 +381,13 @@ def make_env(
 
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
     """The training envs' randomised physics: the env's :class:`Randomization` with
-    ``cfg.corner_prob`` and ``cfg.hard_prob``, or ``None`` without ``--randomize``."""
+    ``cfg.corner_prob`` and ``cfg.hard_prob``, its ranges scaled by ``cfg.range_scale``
+    (:meth:`Randomization.scaled`), or ``None`` without ``--randomize``."""
     if not cfg.randomize:
         return None
     return Randomization(
         corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob, hard_gain=cfg.hard_gain
-    )
+    ).scaled(cfg.range_scale)
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:

@@ -29,13 +29,15 @@ the model's derived constants (``body_subtreemass``, ``dof_invweight0``) follow.
 
 :func:`corners` lists the ``2^4`` combinations of the bounds of friction, torsional friction,
 mass and gain, each with latency and noise at their maxima: the robustness table's cases.
+:meth:`Randomization.scaled` shrinks the four ranges towards nominal (a narrower stated
+range, or a first stage of a curriculum: ``python -m train.ppo --range-scale``).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mujoco
 import numpy as np
@@ -83,6 +85,29 @@ class Randomization:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v}")
+
+    def scaled(self, s: float) -> Randomization:
+        """The ranges shrunk towards nominal by ``s`` in (0, 1]: each bound ``b`` of friction,
+        torsional friction and gain becomes ``1 + s (b - 1)``, each mass bound ``b**s`` (the
+        log-range scaled, so x0.5-2 at ``s = 0.5`` is x0.71-1.41). Latency, noise and the
+        sampling probabilities are kept: they are not ranges of a scale. ``s = 1`` is ``self``."""
+        if not (np.isfinite(s) and 0.0 < s <= 1.0):
+            raise FourFingerError(f"range scale must be in (0, 1], got {s}")
+        if s == 1.0:
+            return self
+
+        def lin(r: tuple[float, float]) -> tuple[float, float]:
+            return (1.0 + s * (r[0] - 1.0), 1.0 + s * (r[1] - 1.0))
+
+        hard = self.hard_gain if math.isinf(self.hard_gain) else 1.0 + s * (self.hard_gain - 1.0)
+        return replace(
+            self,
+            friction=lin(self.friction),
+            torsional=lin(self.torsional),
+            mass=(self.mass[0] ** s, self.mass[1] ** s),
+            gain=lin(self.gain),
+            hard_gain=hard,
+        )
 
     def sample(self, rng: np.random.Generator, nu: int) -> PhysicsSample:
         """One episode's physics: with probability ``corner_prob`` one of :func:`corners`

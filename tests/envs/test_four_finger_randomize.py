@@ -314,6 +314,39 @@ def test_hard_prob_draws_the_hard_region_at_the_stated_rate() -> None:
         assert ratio == pytest.approx(env.scaler.current.mass)
 
 
+def test_scaled_ranges_shrink_towards_nominal_and_are_read_back() -> None:
+    """``Randomization.scaled(s)``: friction, torsional friction and gain bounds move to
+    ``1 + s (b - 1)``, mass bounds to ``b**s`` (log-range scaled); latency, noise and the
+    sampling probabilities stay; ``s = 1`` is the same ranges; ``s`` outside (0, 1] is refused.
+    The corners are the scaled bounds, and in the env every draw's friction, mass and gains
+    read back from the model lie inside the scaled ranges, not only inside the full ones."""
+    r = Randomization(hard_prob=0.5, hard_gain=1.0).scaled(0.5)
+    assert r.friction == (0.75, 1.25) and r.torsional == (0.75, 1.25) and r.gain == (0.9, 1.1)
+    assert r.mass == pytest.approx((1 / math.sqrt(2), math.sqrt(2)))
+    assert (r.latency_prob, r.hard_prob, r.hard_gain) == (0.5, 0.5, 1.0)
+    assert (r.noise_joint, r.noise_pos, r.noise_force) == (0.005, 0.001, 0.05)
+    assert Randomization().scaled(1.0) == Randomization()
+    assert Randomization().scaled(0.25).gain == (0.95, 1.05)
+    for bad in (0.0, -0.5, 1.5, float("nan")):
+        with pytest.raises(FourFingerError, match="range scale"):
+            Randomization().scaled(bad)
+    half = Randomization().scaled(0.5)
+    c = corners(half)
+    assert {s.friction for s in c} == {0.75, 1.25} and {s.gain for s in c} == {0.9, 1.1}
+    assert all(s.latency == 1 for s in c)
+    env = FourFingerRotate(randomize=half)
+    m0 = FourFingerRotate().model
+    p, body = env.scaler.obj_pairs, env.scaler.obj_body
+    for k in range(12):
+        env.reset(seed=k) if k == 0 else env.reset()
+        f = env.model.pair_friction[p, 0] / m0.pair_friction[p, 0]
+        assert np.all((f >= 0.75 - 1e-12) & (f <= 1.25 + 1e-12))
+        mass = env.model.body_mass[body] / m0.body_mass[body]
+        assert 2**-0.5 - 1e-12 <= mass <= 2**0.5 + 1e-12
+        g = env.model.actuator_gainprm[:, 0] / m0.actuator_gainprm[:, 0]
+        assert np.all((g >= 0.9 - 1e-12) & (g <= 1.1 + 1e-12))
+
+
 def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
     """``height = -w * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` of the object's centre after the
     step: 0 for a grasp held high, -w/2 halfway down, and part of the reward."""

@@ -109,5 +109,14 @@ def test_still_hand_counts_the_start_grasps_own_drops(tmp_path) -> None:
     firm = main([str(SHIPPED), *common, "--grip", "firm", "--out", str(tmp_path / "f")])
     assert [r["drops"] for r in firm["corners"]] == [0] * 16
     assert (tmp_path / "f" / "robustness.csv").is_file()
+    short = ["--still", "--corners", "--corner-episodes", "1", "--episodes", "1"]
+    short += ["--seconds", "0.2", "--workers", "1", "--range-scale", "0.5"]
+    half = main([str(SHIPPED), *short, "--out", str(tmp_path / "h")])
+    labels = [r["corner"] for r in half["corners"]]
+    assert len(labels) == 16 and all("friction x0.75" in c or "friction x1.25" in c for c in labels)
+    assert (tmp_path / "h" / "robustness_x0.5.csv").is_file()
+    assert not (tmp_path / "h" / "robustness.csv").exists()
+    with pytest.raises(SystemExit):
+        main([str(SHIPPED), "--range-scale", "2"])
     with pytest.raises(SystemExit):
         main([str(SHIPPED), "--still"])
