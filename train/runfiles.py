@@ -181,14 +181,18 @@ def given(argv: Sequence[str], field: str) -> bool:
 
 def start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
     """Record fine-tune options given with ``--resume`` in config.json (with
-    ``finetune_from_step``); when corner validation starts, the earlier ``best/`` (chosen on
-    other figures) moves to ``best_previous/``."""
+    ``finetune_from_step``); when corner validation starts, or the ranges whose corners are
+    validated change (``range_scale``), the earlier ``best/`` (chosen on other figures) moves
+    to ``best_previous/``."""
     saved = json.loads((run_dir / "config.json").read_text())
     starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
+    new_range = changed.get("range_scale", saved.get("range_scale", 1.0)) != saved.get(
+        "range_scale", 1.0
+    )
     _record(
         run_dir,
         {**changed, "finetune_from_step": done},
-        best_aside="best_previous" if starts_corners else None,
+        best_aside="best_previous" if starts_corners or new_range else None,
     )
 
 

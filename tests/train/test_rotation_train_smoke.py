@@ -217,3 +217,24 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     assert r.returncode == 0, r.stderr[-2000:]
     (cube,) = list((tmp_path / "c").iterdir())
     assert json.loads((cube / "config.json").read_text())["init_from"] == str(run_dir)
+
+
+def test_finetune_moves_best_aside_when_the_validated_ranges_change(tmp_path) -> None:
+    """``start_finetune``: a ``best/`` chosen at one range's corners moves to
+    ``best_previous/`` when ``--range-scale`` changes (its figures are of other corners), and
+    stays when the fine-tune keeps the range (here: only ``--hard-prob`` changes)."""
+    import json
+
+    from train.runfiles import start_finetune
+
+    run = tmp_path / "run"
+    (run / "best").mkdir(parents=True)
+    (run / "best" / "eval.json").write_text("{}")
+    (run / "config.json").write_text(json.dumps({"validate_corners": 2, "range_scale": 0.5}))
+    start_finetune(run, {"hard_prob": 0.5}, 100)
+    assert (run / "best").is_dir() and not (run / "best_previous").exists()
+    start_finetune(run, {"range_scale": 1.0}, 200)
+    assert not (run / "best").exists() and (run / "best_previous" / "eval.json").is_file()
+    cfg = json.loads((run / "config.json").read_text())
+    assert cfg["range_scale"] == 1.0 and cfg["hard_prob"] == 0.5
+    assert cfg["finetune_from_step"] == 200
