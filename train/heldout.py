@@ -28,7 +28,7 @@ of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with 
 directory). ``--grip firm`` starts every episode from the firm-grip test grasps
 (:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on; ``--still`` holds
 the hand still (zero actions) instead of running the policy: the drops are then the start
-grasps' own. ``--range-scale S`` (in (0, 1)) evaluates the corners and factors of the ranges
+grasps' own. ``--range-scale S`` (in (0, 1]) evaluates the corners and factors of the ranges
 shrunk towards nominal (:meth:`envs.four_finger.Randomization.scaled`) and names the files
 ``robustness_xS.csv`` and ``factors_xS.csv``: a narrower stated range.
 """

@@ -186,9 +186,8 @@ def start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
     to ``best_previous/``."""
     saved = json.loads((run_dir / "config.json").read_text())
     starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
-    new_range = changed.get("range_scale", saved.get("range_scale", 1.0)) != saved.get(
-        "range_scale", 1.0
-    )
+    scale = saved.get("range_scale", 1.0)
+    new_range = changed.get("range_scale", scale) != scale
     _record(
         run_dir,
         {**changed, "finetune_from_step": done},
