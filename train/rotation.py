@@ -188,6 +188,12 @@ class RotateConfig:
     height_weight: float = opt(
         1.0, "weight of the env's height term (penalises the object sagging below 0.07 m)"
     )
+    height_from: str = opt(
+        "hold",
+        "the height term's reference: hold (0.07 m, about 7 mm below a held object) or start "
+        "(the object's start height: every mm of sag counts)",
+        choices=("hold", "start"),
+    )
     slip_weight: float = opt(
         0.0, "weight of the contact-slip penalty (mean sliding speed of the contacts [m/s])"
     )
@@ -357,6 +363,7 @@ def make_env(
             drop_weight=cfg.drop_weight,
             rotation_cap=cfg.rotation_cap,
             height_weight=cfg.height_weight,
+            height_from=cfg.height_from,
             slip_weight=cfg.slip_weight,
             history=cfg.history,
             privileged=cfg.privileged_critic,

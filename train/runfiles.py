@@ -162,6 +162,7 @@ FINETUNE = (
     "rotation_cap",
     "drop_weight",
     "height_weight",
+    "height_from",
     "slip_weight",
     "checkpoint_every",
     "eval_episodes",

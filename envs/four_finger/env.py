@@ -71,7 +71,11 @@ state (the observation is not Markov).
   below ``HOLD_Z`` (0.07 m; the start grasps hold it at about 0.077 m) as a fraction of the way
   to the drop threshold ``DROP_Z`` (default weight 0). Without it, trained policies carried
   the sphere in a low two-finger pinch 2-10 mm above the drop threshold, where a small sag
-  ends the episode (docs/four_finger.md);
+  ends the episode (docs/four_finger.md). With ``height_from="start"`` the reference is the
+  object's height at the episode's start, ``z_0``, instead of ``HOLD_Z``:
+  ``-height_weight * max(0, z_0 - z) / (z_0 - DROP_Z)``, so every millimetre of sag counts
+  (with ``HOLD_Z`` the first 7 mm cost nothing: a slow sag of 1-2 mm/s gives no signal
+  inside a 3.2 s training episode);
 - ``slip``: ``-slip_weight * v_slip``, the mean tangential sliding speed [m/s] of the
   finger-object contacts at the end of the step (``Physics.object_slip``; default weight 0):
   a sliding contact's friction acts along the slip, so it holds less against the weight.
@@ -188,8 +192,10 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     max_setpoint_step : ``q^max`` of the thesis [rad per policy step].
     frame_skip : physics substeps per policy step.
     timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
-    drop_weight, action_weight, slip_weight : weights of the optional reward terms
-        (module doc).
+    drop_weight, action_weight, height_weight, slip_weight : weights of the optional reward
+        terms (module doc).
+    height_from : the height term's reference, ``"hold"`` (``HOLD_Z``) or ``"start"`` (the
+        object's start height; module doc).
     rotation_cap : bound of the rotation reward [rad/s] (``inf``: none).
     randomize : a :class:`~envs.four_finger.randomize.Randomization` drawn at every reset, or
         ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
@@ -227,6 +233,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         drop_weight: float = 0.0,
         action_weight: float = 0.0,
         height_weight: float = 0.0,
+        height_from: str = "hold",
         slip_weight: float = 0.0,
         rotation_cap: float = math.inf,
         randomize: Randomization | None = None,
@@ -276,6 +283,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise FourFingerError("give randomize (drawn per episode) or physics (fixed), not both")
         if render_mode not in (None, "rgb_array"):
             raise FourFingerError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if height_from not in ("hold", "start"):
+            raise FourFingerError(f"height_from must be 'hold' or 'start', got {height_from!r}")
         if camera not in ("side", "top"):
             raise FourFingerError(f"camera must be 'side' or 'top', got {camera!r}")
         self.object = object
@@ -285,6 +294,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.drop_weight = float(drop_weight)
         self.action_weight = float(action_weight)
         self.height_weight = float(height_weight)
+        self.height_from = height_from
+        self._z_ref = HOLD_Z  # the height term's reference [m] (reset sets it for "start")
         self.slip_weight = float(slip_weight)
         self.rotation_cap = float(rotation_cap)
         self.render_mode = render_mode
@@ -397,10 +408,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return np.minimum(np.maximum(out, self._priv_lo), self._priv_hi)
 
     def _sag(self) -> float:
-        """How far the object's centre sits below ``HOLD_Z``, as a fraction of the way down to
-        ``DROP_Z``: ``max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)`` (1 at the drop threshold)."""
+        """How far the object's centre sits below the reference ``z_ref`` (``HOLD_Z``, or its
+        start height with ``height_from="start"``), as a fraction of the way down to
+        ``DROP_Z``: ``max(0, z_ref - z) / (z_ref - DROP_Z)`` (1 at the drop threshold)."""
         z = float(self.physics.object_pos()[2])
-        return max(0.0, HOLD_Z - z) / (HOLD_Z - DROP_Z)
+        return max(0.0, self._z_ref - z) / (self._z_ref - DROP_Z)
 
     def _yaw_rate(self, quat_before: NDArray[np.float64]) -> float:
         """Mean angular velocity about world +z since ``quat_before`` [rad/s]."""
@@ -425,6 +437,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         d.qpos[:] = self.grasps.qpos[i]
         d.ctrl[:] = self.grasps.ctrl[i]
         mujoco.mj_forward(m, d)
+        if self.height_from == "start":  # above DROP_Z: a start grasp holds the object
+            self._z_ref = max(float(self.physics.object_pos()[2]), DROP_Z + 1e-3)
         self._angle = self._twist = self._net = 0.0
         self._quat0[:] = self.physics.object_quat()
         obs = self._stacked(self._sensed(), first=True)

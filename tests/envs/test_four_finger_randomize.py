@@ -367,6 +367,33 @@ def test_height_term_penalises_sag_toward_the_drop_threshold() -> None:
     assert r == pytest.approx(info["rotation"] + info["drop"] + info["action"] + info["height"])
 
 
+def test_height_from_start_counts_every_millimetre_of_sag() -> None:
+    """``height_from="start"``: the reference is the object's height at the reset, ``z_0``:
+    ``height = -w * max(0, z_0 - z) / (z_0 - DROP_Z)``. A 3 mm sag, free with ``HOLD_Z`` (7 mm
+    below a held object), costs about ``w * 3 / 27`` from the start height; bad names are
+    refused."""
+    from envs.four_finger import DROP_Z
+    from envs.four_finger.env import HOLD_Z
+
+    hold = FourFingerRotate(height_weight=2.0)
+    start = FourFingerRotate(height_weight=2.0, height_from="start")
+    for env in (hold, start):
+        env.reset(seed=0, options={"grasp": 3})
+    z0 = start.physics.object_pos()[2]
+    assert z0 - 0.003 > HOLD_Z and start._z_ref == z0 and hold._z_ref == HOLD_Z
+    for env in (hold, start):
+        env.data.qpos[env.physics.obj_qpos + 2] = z0 - 0.003
+    _, _, _, _, h = hold.step(np.zeros(12, np.float32))
+    _, r, _, _, s = start.step(np.zeros(12, np.float32))
+    z = start.physics.object_pos()[2]
+    assert h["height"] == 0.0
+    assert s["height"] == pytest.approx(-2.0 * (z0 - z) / (z0 - DROP_Z))
+    assert -2.0 * 0.2 < s["height"] < -2.0 * 0.05
+    assert r == pytest.approx(sum(s[k] for k in ("rotation", "drop", "action", "height", "slip")))
+    with pytest.raises(FourFingerError, match="height_from"):
+        FourFingerRotate(height_from="palm")
+
+
 def test_history_stacks_the_last_frames_oldest_first() -> None:
     """``history=3``: the observation is three sensed frames, oldest first; at a reset all
     three are the first frame, each step shifts them by one, and the newest frame is what

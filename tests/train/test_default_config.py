@@ -50,3 +50,11 @@ def test_thesis_option_restores_the_thesis_setup() -> None:
     env = make_env(cfg)()
     assert env.spec.max_episode_steps == 64 and math.isinf(env.unwrapped.rotation_cap)
     assert env.unwrapped.randomize is None and env.unwrapped.drop_weight == 0.0
+
+
+def test_height_from_reaches_the_training_env() -> None:
+    """``--height-from start`` reaches the env the run trains on; the default keeps the
+    fixed reference (``HOLD_Z``) that the README's height term means."""
+    assert make_env(parse_config([]))().unwrapped.height_from == "hold"
+    env = make_env(parse_config(["--height-from", "start"]))().unwrapped
+    assert env.height_from == "start"
