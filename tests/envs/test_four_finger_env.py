@@ -472,6 +472,27 @@ def test_grasp_cache_is_varied_and_reloads(tmp_path, monkeypatch) -> None:
             assert not e.step(np.zeros(12, dtype=np.float32))[2]
 
 
+def test_start_grasps_hold_the_object_clear_of_the_drop_line(tmp_path, monkeypatch) -> None:
+    """Every kept grasp starts with the object's centre at least ``START_CLEARANCE`` (10 mm)
+    above ``DROP_Z``. Before that condition the cube's 51st nominal test grasp (generator
+    seed ``GRASP_SETS["test"]``) started 1.6 mm above it, the cube low and tilted: any
+    motion counted as a drop. The object's height is read back from MuJoCo after a reset."""
+    from envs.four_finger import DROP_Z
+    from envs.four_finger.cache import GRASP_SETS, START_CLEARANCE
+
+    monkeypatch.setenv("IHM_CACHE", str(tmp_path))
+    c = generate_grasps("cube", True, 52, seed=GRASP_SETS["test"])
+    e = FourFingerRotate(object="cube", n_grasps=52)
+    e.grasps = c
+    e.reset(seed=0)
+    z = []
+    for i in range(len(c)):
+        e.reset(options={"grasp": i})
+        z.append(float(e.physics.object_pos()[2]))
+    assert min(z) >= DROP_Z + START_CLEARANCE
+    assert np.median(z) > 0.075  # held high, as the sphere's are (about 0.077 m)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
