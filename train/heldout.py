@@ -23,7 +23,9 @@ and counted (``unheld_starts``). The robustness table reports both: the policy's
 (screened) and the drops from every test grasp (unscreened).
 
 Writes ``eval_heldout.json`` and, with ``--corners``, ``robustness.csv`` (one row per corner
-of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each), with ``--factors``
+of :func:`envs.four_finger.corners`: ``--corner-episodes`` episodes each; ``dropped_grasps``
+names the test grasps whose episodes dropped, so a drop that recurs from one start grasp
+at every corner shows), with ``--factors``
 ``factors.csv`` (one factor at a time, :func:`factors`) to ``--out`` (default: the policy
 directory). ``--grip firm`` starts every episode from the firm-grip test grasps
 (:data:`envs.four_finger.GRIPS`) whatever grip the policy was trained on; ``--still`` holds
@@ -97,7 +99,8 @@ def evaluate_heldout(
 ) -> dict[str, Any]:
     """``episodes`` deterministic episodes from test grasps ``0 .. episodes - 1`` (at most
     :data:`TEST_GRASPS`) under ``physics`` (nominal: ``None``); :func:`summarize` of them
-    plus ``grasps`` (the test-grasp index of each episode, in the order they ended).
+    plus ``grasps`` (the test-grasp index of each episode, in the order they ended) and
+    ``dropped_grasps`` (the indices of those that dropped, sorted).
 
     ``act`` maps a batch of observations to a batch of actions; ``seed`` seeds the envs'
     sensor noise. ``screen``: start only from test grasps that hold for ``seconds`` with
@@ -129,7 +132,12 @@ def evaluate_heldout(
     )
     for env in envs:
         env.close()
-    res = {**summarize(eps), "grasps": [e["grasp"] for e in eps], "seconds": seconds}
+    res = {
+        **summarize(eps),
+        "grasps": [e["grasp"] for e in eps],
+        "dropped_grasps": sorted(e["grasp"] for e in eps if e["dropped"]),
+        "seconds": seconds,
+    }
     return {**res, "unheld_starts": unheld} if screen else res
 
 
@@ -204,6 +212,7 @@ def _corner_job(args: tuple[str, PhysicsSample, int, float, bool, str | None, bo
     res = evaluate_heldout(act, kw, episodes, seconds, physics=physics)
     res.pop("grasps")
     row = {"corner": physics.label(), **res}
+    row["dropped_grasps"] = " ".join(map(str, res["dropped_grasps"]))  # test-grasp indices
     if screen:
         s = evaluate_heldout(act, kw, episodes, seconds, physics=physics, screen=True)
         row.update(
@@ -308,6 +317,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             hold_still=a.still,
         )
         cols = ["corner", "episodes", "speed_rad_s", "speed_median_rad_s", "drop_rate", "drops"]
+        cols += ["dropped_grasps"]
         if a.screen:
             cols += [
                 "screened_episodes",

@@ -45,6 +45,8 @@ def test_screened_start_grasps_are_the_ones_that_hold_still() -> None:
     skipped = set(range(max(held) + 1)) - held
     assert scr["unheld_starts"] == len(skipped) > 0
     assert plain["drops"] == len(set(range(12)) - held) > 0
+    assert plain["dropped_grasps"] == sorted(set(range(12)) - held)  # the two paths agree
+    assert scr["dropped_grasps"] == []
     assert "unheld_starts" not in plain
 
 
@@ -109,6 +111,10 @@ def test_still_hand_counts_the_start_grasps_own_drops(tmp_path) -> None:
     firm = main([str(SHIPPED), *common, "--grip", "firm", "--out", str(tmp_path / "f")])
     assert [r["drops"] for r in firm["corners"]] == [0] * 16
     assert (tmp_path / "f" / "robustness.csv").is_file()
+    with (tmp_path / "n" / "robustness.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [len(r["dropped_grasps"].split()) for r in rows] == [int(r["drops"]) for r in rows]
+    assert {g for r in rows for g in r["dropped_grasps"].split()} <= {"0", "1", "2"}
     short = ["--still", "--corners", "--corner-episodes", "1", "--episodes", "1"]
     short += ["--seconds", "0.2", "--workers", "1", "--range-scale", "0.5"]
     half = main([str(SHIPPED), *short, "--out", str(tmp_path / "h")])
