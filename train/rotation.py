@@ -49,6 +49,7 @@ import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import (
     FRAME_SKIP,
     GRIPS,
+    HEIGHT_FROM,
     N_OBS,
     N_PRIVILEGED,
     OBJECTS,
@@ -192,7 +193,7 @@ class RotateConfig:
         "hold",
         "the height term's reference: hold (0.07 m, about 7 mm below a held object) or start "
         "(the object's start height: every mm of sag counts)",
-        choices=("hold", "start"),
+        choices=HEIGHT_FROM,
     )
     slip_weight: float = opt(
         0.0, "weight of the contact-slip penalty (mean sliding speed of the contacts [m/s])"

@@ -21,13 +21,22 @@ from envs.four_finger.cache import (
     FIRM_SQUEEZE,
     GRASP_SETS,
     GRIPS,
+    START_CLEARANCE,
     VERIFY_STEPS,
     GraspCache,
     generate_grasps,
     grasp_cache,
     worst_hold,
 )
-from envs.four_finger.env import N_OBS, N_PRIVILEGED, FourFingerRotate, yaw_rate, z_twist
+from envs.four_finger.env import (
+    HEIGHT_FROM,
+    HOLD_Z,
+    N_OBS,
+    N_PRIVILEGED,
+    FourFingerRotate,
+    yaw_rate,
+    z_twist,
+)
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     DROP_Z,
@@ -54,6 +63,8 @@ __all__ = [
     "FIRM_SQUEEZE",
     "GRASP_SETS",
     "GRIPS",
+    "HEIGHT_FROM",
+    "HOLD_Z",
     "DROP_Z",
     "FRAME_SKIP",
     "MAX_FORCE",
@@ -63,6 +74,7 @@ __all__ = [
     "OUT_RADIUS",
     "SOLVERS",
     "SOLVER_TOLERANCE",
+    "START_CLEARANCE",
     "STATE_SPEC",
     "TIMESTEP",
     "TORSIONAL_FRICTION",

@@ -137,11 +137,12 @@ from envs.four_finger.physics import (
 from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
 from ihm.hands import four_finger as ff
 
-__all__ = ["HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
+__all__ = ["HEIGHT_FROM", "HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
 
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
 HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
+HEIGHT_FROM = ("hold", "start")  # the height term's references: HOLD_Z, the start height
 
 
 def yaw_rate(quat_before: NDArray[np.float64], quat_after: NDArray[np.float64], dt: float) -> float:
@@ -283,8 +284,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise FourFingerError("give randomize (drawn per episode) or physics (fixed), not both")
         if render_mode not in (None, "rgb_array"):
             raise FourFingerError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if height_from not in ("hold", "start"):
-            raise FourFingerError(f"height_from must be 'hold' or 'start', got {height_from!r}")
+        if height_from not in HEIGHT_FROM:
+            raise FourFingerError(f"height_from must be one of {HEIGHT_FROM}, got {height_from!r}")
         if camera not in ("side", "top"):
             raise FourFingerError(f"camera must be 'side' or 'top', got {camera!r}")
         self.object = object
@@ -437,7 +438,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         d.qpos[:] = self.grasps.qpos[i]
         d.ctrl[:] = self.grasps.ctrl[i]
         mujoco.mj_forward(m, d)
-        if self.height_from == "start":  # above DROP_Z: a start grasp holds the object
+        if self.height_from == "start":  # kept above DROP_Z for a user's own grasps
             self._z_ref = max(float(self.physics.object_pos()[2]), DROP_Z + 1e-3)
         self._angle = self._twist = self._net = 0.0
         self._quat0[:] = self.physics.object_quat()
