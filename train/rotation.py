@@ -198,6 +198,9 @@ class RotateConfig:
     slip_weight: float = opt(
         0.0, "weight of the contact-slip penalty (mean sliding speed of the contacts [m/s])"
     )
+    tilt_weight: float = opt(
+        0.0, "weight of the tilt penalty (the object's tilt since the episode's start [rad])"
+    )
     rotation_cap: float = opt(
         1.0, "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
     )
@@ -366,6 +369,7 @@ def make_env(
             height_weight=cfg.height_weight,
             height_from=cfg.height_from,
             slip_weight=cfg.slip_weight,
+            tilt_weight=cfg.tilt_weight,
             history=cfg.history,
             privileged=cfg.privileged_critic,
             grip=cfg.grip,

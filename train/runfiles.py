@@ -164,6 +164,7 @@ FINETUNE = (
     "height_weight",
     "height_from",
     "slip_weight",
+    "tilt_weight",
     "checkpoint_every",
     "eval_episodes",
     "grip",

@@ -35,6 +35,7 @@ from envs.four_finger.env import (
     N_PRIVILEGED,
     FourFingerRotate,
     yaw_rate,
+    z_tilt,
     z_twist,
 )
 from envs.four_finger.physics import (
@@ -96,5 +97,6 @@ __all__ = [
     "scene_name",
     "worst_hold",
     "yaw_rate",
+    "z_tilt",
     "z_twist",
 ]

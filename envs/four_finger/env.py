@@ -58,7 +58,7 @@ state (the observation is not Markov).
 
 ## Rewards
 
-``reward = rotation + drop + action + height + slip`` with every term in ``info``:
+``reward = rotation + drop + action + height + slip + tilt`` with every term in ``info``:
 
 - ``rotation``: the object's mean angular velocity about the world +z axis over
   the policy step, ``[log(R_t R_{t-1}^T)]_z / dt`` [rad/s] (positive:
@@ -78,7 +78,11 @@ state (the observation is not Markov).
   inside a 3.2 s training episode);
 - ``slip``: ``-slip_weight * v_slip``, the mean tangential sliding speed [m/s] of the
   finger-object contacts at the end of the step (``Physics.object_slip``; default weight 0):
-  a sliding contact's friction acts along the slip, so it holds less against the weight.
+  a sliding contact's friction acts along the slip, so it holds less against the weight;
+- ``tilt``: ``-tilt_weight * tilt``, the object's tilt since the episode's start [rad]
+  (:func:`z_tilt`: the angle by which its rotation since then turns the vertical; default
+  weight 0). Trained without it, cylinder policies tipped the upright cylinder over (60-90
+  degrees within 5-15 s) at slightly higher friction and lost it (docs/four_finger.md).
 
 ## Episode End
 
@@ -137,7 +141,7 @@ from envs.four_finger.physics import (
 from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
 from ihm.hands import four_finger as ff
 
-__all__ = ["HEIGHT_FROM", "HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_twist"]
+__all__ = ["HEIGHT_FROM", "HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_tilt", "z_twist"]
 
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
@@ -183,6 +187,20 @@ def z_twist(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float
     return a - 2.0 * math.pi if a > math.pi else (a + 2.0 * math.pi if a <= -math.pi else a)
 
 
+def z_tilt(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float:
+    """Tilt of the object since ``quat_start`` [rad], in ``[0, pi]``: the angle by which the
+    rotation ``q_rel = q * conj(q_start)`` (MuJoCo ``wxyz``) turns the world +z axis, the
+    swing of the swing-twist decomposition (:func:`z_twist` is the twist),
+    ``cos(tilt) = w^2 + z^2 - x^2 - y^2 = 1 - 2 (x^2 + y^2)``. Zero for any rotation about z."""
+    w0, x0, y0, z0 = quat_start.tolist()
+    w1, x1, y1, z1 = quat.tolist()
+    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
+    y = -w1 * y0 + x1 * z0 + y1 * w0 - z1 * x0
+    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    return 2.0 * math.atan2(math.sqrt(x * x + y * y), math.sqrt(w * w + z * z))
+
+
 class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Rotate a held object about the vertical axis with the four-finger hand.
 
@@ -193,8 +211,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     max_setpoint_step : ``q^max`` of the thesis [rad per policy step].
     frame_skip : physics substeps per policy step.
     timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
-    drop_weight, action_weight, height_weight, slip_weight : weights of the optional reward
-        terms (module doc).
+    drop_weight, action_weight, height_weight, slip_weight, tilt_weight : weights of the
+        optional reward terms (module doc).
     height_from : the height term's reference, ``"hold"`` (``HOLD_Z``) or ``"start"`` (the
         object's start height; module doc).
     rotation_cap : bound of the rotation reward [rad/s] (``inf``: none).
@@ -236,6 +254,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         height_weight: float = 0.0,
         height_from: str = "hold",
         slip_weight: float = 0.0,
+        tilt_weight: float = 0.0,
         rotation_cap: float = math.inf,
         randomize: Randomization | None = None,
         physics: PhysicsSample | None = None,
@@ -263,6 +282,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             ("action_weight", action_weight),
             ("height_weight", height_weight),
             ("slip_weight", slip_weight),
+            ("tilt_weight", tilt_weight),
         ):
             if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -298,6 +318,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.height_from = height_from
         self._z_ref = HOLD_Z  # the height term's reference [m] (reset sets it for "start")
         self.slip_weight = float(slip_weight)
+        self.tilt_weight = float(tilt_weight)
         self.rotation_cap = float(rotation_cap)
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
@@ -473,6 +494,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "action": -self.action_weight * float(a @ a) / ff.NU,
             "height": -self.height_weight * self._sag(),
             "slip": -self.slip_weight * ph.object_slip() if self.slip_weight else 0.0,
+            "tilt": -self.tilt_weight * z_tilt(self._quat0, ph.object_quat())
+            if self.tilt_weight
+            else 0.0,
         }
         reward = sum(terms.values())
         info = {

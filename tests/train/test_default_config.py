@@ -28,7 +28,8 @@ def test_readme_states_the_default_configuration() -> None:
         f"| object | `{u.object}`, gravity {'on' if u.gravity else 'off'} |",
         f"| training episode | {steps} steps ({steps * POLICY_DT:g} s) |",
         f"| reward | rotation about +z [rad/s], {cap}; height term weight {u.height_weight:g}; "
-        f"drop penalty {u.drop_weight:g}; slip penalty {u.slip_weight:g} |",
+        f"drop penalty {u.drop_weight:g}; slip penalty {u.slip_weight:g}; "
+        f"tilt penalty {u.tilt_weight:g} |",
         f"| physics | {physics} |",
         f"| budget | {cfg.total_steps:,} env steps |",
         f"| nets | policy {_nets(cfg.pi)}, value {_nets(cfg.vf)} |",
@@ -58,3 +59,8 @@ def test_height_from_reaches_the_training_env() -> None:
     assert make_env(parse_config([]))().unwrapped.height_from == "hold"
     env = make_env(parse_config(["--height-from", "start"]))().unwrapped
     assert env.height_from == "start"
+
+
+def test_tilt_weight_reaches_the_training_env() -> None:
+    assert make_env(parse_config([]))().unwrapped.tilt_weight == 0.0
+    assert make_env(parse_config(["--tilt-weight", "2"]))().unwrapped.tilt_weight == 2.0
