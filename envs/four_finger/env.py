@@ -149,18 +149,25 @@ HOLD_Z = 0.07  # [m] object centre height below which the height term penalises 
 HEIGHT_FROM = ("hold", "start")  # the height term's references: HOLD_Z, the start height
 
 
+def _relative(q0: NDArray[np.float64], q1: NDArray[np.float64]) -> tuple[float, ...]:
+    """``q_1 * conj(q_0)`` (MuJoCo ``wxyz``), the rotation from ``q0`` to ``q1`` in the world
+    frame, in plain float arithmetic (4x cheaper than ``mju_mulQuat`` here)."""
+    w0, x0, y0, z0 = q0.tolist()
+    w1, x1, y1, z1 = q1.tolist()
+    return (
+        w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0,
+        -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0,
+        -w1 * y0 + x1 * z0 + y1 * w0 - z1 * x0,
+        -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0,
+    )
+
+
 def yaw_rate(quat_before: NDArray[np.float64], quat_after: NDArray[np.float64], dt: float) -> float:
     """World-z component of the mean angular velocity taking ``quat_before`` to ``quat_after``
     (MuJoCo ``wxyz`` quaternions) in ``dt`` seconds [rad/s]: ``[log(R_1 R_0^T)]_z / dt``.
 
     ``mju_quat2Vel(q_1 * conj(q_0), dt)[2]`` in plain float arithmetic (4x cheaper here)."""
-    w0, x0, y0, z0 = quat_before.tolist()
-    w1, x1, y1, z1 = quat_after.tolist()
-    # rel = q_1 * conj(q_0): the rotation in the world frame
-    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
-    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
-    y = -w1 * y0 + x1 * z0 + y1 * w0 - z1 * x0
-    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    w, x, y, z = _relative(quat_before, quat_after)
     sin_half = math.sqrt(x * x + y * y + z * z)
     if sin_half < mujoco.mjMINVAL:
         return 0.0
@@ -177,10 +184,7 @@ def z_twist(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float
     ``angle = 2 atan2(z, w)`` of ``q_rel``. For a rotation about z it is that rotation's
     angle; a tumble (rotation about a horizontal axis) adds nothing. Undefined (0 returned)
     for a half turn about a horizontal axis, where ``w = z = 0``."""
-    w0, x0, y0, z0 = quat_start.tolist()
-    w1, x1, y1, z1 = quat.tolist()
-    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
-    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    w, _, _, z = _relative(quat_start, quat)
     if w * w + z * z < 1e-24:
         return 0.0
     a = 2.0 * math.atan2(z, w)
@@ -192,12 +196,7 @@ def z_tilt(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float:
     rotation ``q_rel = q * conj(q_start)`` (MuJoCo ``wxyz``) turns the world +z axis, the
     swing of the swing-twist decomposition (:func:`z_twist` is the twist),
     ``cos(tilt) = w^2 + z^2 - x^2 - y^2 = 1 - 2 (x^2 + y^2)``. Zero for any rotation about z."""
-    w0, x0, y0, z0 = quat_start.tolist()
-    w1, x1, y1, z1 = quat.tolist()
-    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
-    x = -w1 * x0 + x1 * w0 - y1 * z0 + z1 * y0
-    y = -w1 * y0 + x1 * z0 + y1 * w0 - z1 * x0
-    z = -w1 * z0 - x1 * y0 + y1 * x0 + z1 * w0
+    w, x, y, z = _relative(quat_start, quat)
     return 2.0 * math.atan2(math.sqrt(x * x + y * y), math.sqrt(w * w + z * z))
 
 
