@@ -230,6 +230,11 @@ class RotateConfig:
         "with --hard-prob: upper bound of the servo gain scales in the hard region (1.2: the "
         "whole range x0.8-1.2; 1.0: the weak half)",
     )
+    latency_prob: float = opt(
+        Randomization().latency_prob,
+        "with --randomize: probability that an episode has one step of action latency (the "
+        "corners always have it)",
+    )
     range_scale: float = opt(
         1.0,
         "with --randomize: shrink the friction, torsional, mass and gain ranges towards nominal "
@@ -307,10 +312,12 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.privileged_critic and cfg.shield != "none":
         problems.append("--privileged-critic cannot be combined with a --shield")
-    try:  # --corner-prob, --hard-prob, --hard-gain, --range-scale: Randomization's own checks
-        training_randomization(replace(cfg, randomize=True))
+    try:  # --corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale
+        training_randomization(replace(cfg, randomize=True))  # Randomization's own checks
     except FourFingerError as e:
-        problems.append(f"--corner-prob, --hard-prob, --hard-gain, --range-scale: {e}")
+        problems.append(
+            f"--corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale: {e}"
+        )
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
@@ -393,12 +400,15 @@ def make_env(
 
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
     """The training envs' randomised physics: the env's :class:`Randomization` with
-    ``cfg.corner_prob`` and ``cfg.hard_prob``, its ranges scaled by ``cfg.range_scale``
-    (:meth:`Randomization.scaled`), or ``None`` without ``--randomize``."""
+    ``cfg.corner_prob``, ``cfg.hard_prob`` and ``cfg.latency_prob``, its ranges scaled by
+    ``cfg.range_scale`` (:meth:`Randomization.scaled`), or ``None`` without ``--randomize``."""
     if not cfg.randomize:
         return None
     return Randomization(
-        corner_prob=cfg.corner_prob, hard_prob=cfg.hard_prob, hard_gain=cfg.hard_gain
+        corner_prob=cfg.corner_prob,
+        hard_prob=cfg.hard_prob,
+        hard_gain=cfg.hard_gain,
+        latency_prob=cfg.latency_prob,
     ).scaled(cfg.range_scale)
 
 

@@ -157,6 +157,7 @@ FINETUNE = (
     "corner_prob",
     "hard_prob",
     "hard_gain",
+    "latency_prob",
     "range_scale",
     "validate_corners",
     "rotation_cap",

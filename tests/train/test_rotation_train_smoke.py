@@ -159,6 +159,13 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     assert r is not None and (r.corner_prob, r.hard_prob) == (0.0, 0.25)
     with pytest.raises(SystemExit):
         parse_config(["--corner-prob", "0.6", "--hard-prob", "0.5"])
+    late = training_randomization(parse_config(["--randomize", "--latency-prob", "1"]))
+    assert late is not None and late.latency_prob == 1.0
+    rng = np.random.default_rng(0)
+    assert all(late.sample(rng, 12).latency == 1 for _ in range(50))
+    assert training_randomization(parse_config(["--randomize"])).latency_prob == 0.5
+    with pytest.raises(SystemExit):
+        parse_config(["--latency-prob", "1.5"])
     half = training_randomization(parse_config(["--randomize", "--range-scale", "0.5"]))
     assert half is not None and half.friction == (0.75, 1.25) and half.gain == (0.9, 1.1)
     for bad in ("0", "1.5"):
