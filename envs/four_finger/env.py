@@ -81,8 +81,8 @@ state (the observation is not Markov).
   a sliding contact's friction acts along the slip, so it holds less against the weight;
 - ``tilt``: ``-tilt_weight * tilt``, the object's tilt since the episode's start [rad]
   (:func:`z_tilt`: the angle by which its rotation since then turns the vertical; default
-  weight 0). Trained without it, cylinder policies tipped the upright cylinder over (60-90
-  degrees within 5-15 s) at slightly higher friction and lost it (docs/four_finger.md).
+  weight 0). Trained without it, cylinder policies tipped the upright cylinder over (60-100
+  degrees within 7-18 s) at slightly higher friction and lost it (docs/four_finger.md).
 
 ## Episode End
 
