@@ -235,6 +235,11 @@ class RotateConfig:
         "with --randomize: probability that an episode has one step of action latency (the "
         "corners always have it)",
     )
+    replay_prob: float = opt(
+        0.0,
+        "probability that a training episode restarts a start (grasp and physics) that "
+        "dropped the object before in the same env (failure replay; envs.four_finger)",
+    )
     range_scale: float = opt(
         1.0,
         "with --randomize: shrink the friction, torsional, mass and gain ranges towards nominal "
@@ -320,6 +325,8 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
+    if not 0.0 <= cfg.replay_prob <= 1.0:
+        problems.append(f"--replay-prob must be in [0, 1], got {cfg.replay_prob}")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:
@@ -381,6 +388,7 @@ def make_env(
             privileged=cfg.privileged_critic,
             grip=cfg.grip,
             randomize=training_randomization(cfg) if train and physics is None else None,
+            replay_prob=cfg.replay_prob if train else 0.0,
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
         )

@@ -158,6 +158,7 @@ FINETUNE = (
     "hard_prob",
     "hard_gain",
     "latency_prob",
+    "replay_prob",
     "range_scale",
     "validate_corners",
     "rotation_cap",

@@ -114,6 +114,15 @@ from the held-out set instead (a generator seed no training run uses,
 friction, explicit contact pairs. ``randomize=Randomization()`` draws friction, torsional
 friction, object mass, servo gains, one step of action latency and sensor noise per episode;
 ``physics=PhysicsSample(...)`` fixes them (:mod:`envs.four_finger.randomize`).
+
+## Failure replay
+
+``replay_prob=p > 0``: every episode that drops the object puts its start (grasp index and
+physics sample) into a buffer of the last ``REPLAY_SIZE`` such starts; a reset without
+``options["grasp"]`` then restarts, with probability ``p``, one of them drawn uniformly
+(it leaves the buffer, and comes back if it drops again). It is Prioritized Level Replay's
+idea (Jiang et al. 2021) for start states: the rare starts that a policy drops are trained
+on more often. Each env keeps its own buffer; ``p = 0`` (the default) draws nothing extra.
 """
 
 from __future__ import annotations
@@ -147,6 +156,7 @@ N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
 HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
 HEIGHT_FROM = ("hold", "start")  # the height term's references: HOLD_Z, the start height
+REPLAY_SIZE = 64  # failure replay: dropped starts an env remembers (the last ones)
 
 
 def _relative(q0: NDArray[np.float64], q1: NDArray[np.float64]) -> tuple[float, ...]:
@@ -220,6 +230,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     grasps : start-grasp set, ``"train"`` or ``"test"`` (held out).
     n_grasps : size of the starting-state cache.
     privileged : append the critic's privileged state to the observation (module doc).
+    replay_prob : probability that a reset restarts a start this env dropped (module doc,
+        "Failure replay"); 0: never.
     grip : how the start grasps squeeze, ``"nominal"`` (the thesis' inward grip) or
         ``"firm"`` (also lifting the object and 1 N harder, verified to hold still under
         the worst randomised physics): :data:`envs.four_finger.cache.GRIPS`.
@@ -268,6 +280,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         torsional: bool = True,
         history: int = 1,
         privileged: bool = False,
+        replay_prob: float = 0.0,
     ) -> None:
         scene_name(object)
         if not isinstance(history, (int, np.integer)) or history < 1:
@@ -291,6 +304,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             or rotation_cap <= 0
         ):
             raise FourFingerError(f"rotation_cap must be > 0 (inf: no cap), got {rotation_cap!r}")
+        if not isinstance(replay_prob, (int, float)) or not 0.0 <= replay_prob <= 1.0:
+            raise FourFingerError(f"replay_prob must be in [0, 1], got {replay_prob!r}")
         if max_setpoint_step <= 0 or timestep <= 0:
             raise FourFingerError("max_setpoint_step and timestep must be > 0")
         if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
@@ -319,6 +334,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.slip_weight = float(slip_weight)
         self.tilt_weight = float(tilt_weight)
         self.rotation_cap = float(rotation_cap)
+        self.replay_prob = float(replay_prob)
+        self._failed: list[tuple[int, PhysicsSample | None]] = []  # failure replay's buffer
+        self._grasp = 0
         self.render_mode = render_mode
         self.width, self.height, self.camera = width, height, camera
         self.physics = Physics(object, self.gravity, float(timestep), solver, bool(torsional))
@@ -446,13 +464,21 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         """Start from a cached stable grasp (``options={"grasp": i}`` picks one)."""
         super().reset(seed=seed)
         i = None if options is None else options.get("grasp")
+        replay = None
+        if i is None and self._failed and self.np_random.uniform() < self.replay_prob:
+            replay = self._failed.pop(int(self.np_random.integers(len(self._failed))))
+            i = replay[0]
         if i is None:
             i = int(self.np_random.integers(len(self.grasps)))
         elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):
             raise FourFingerError(f"options['grasp'] must be in [0, {len(self.grasps)}), got {i!r}")
         m, d = self.model, self.data
         if self.randomize is not None:
-            self.scaler.apply(self.randomize.sample(self.np_random, ff.NU))  # type: ignore[union-attr]
+            s = replay[1] if replay is not None else None
+            if s is None:
+                s = self.randomize.sample(self.np_random, ff.NU)
+            self.scaler.apply(s)  # type: ignore[union-attr]
+        self._grasp = int(i)
         self._prev_action[:] = 0.0
         mujoco.mj_resetData(m, d)
         d.qpos[:] = self.grasps.qpos[i]
@@ -486,6 +512,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._net += math.remainder(twist - self._twist, 2.0 * math.pi)
         self._twist = twist
         dropped = ph.dropped()
+        if dropped and self.replay_prob > 0:
+            self._failed.append((self._grasp, self.scaler.current if self.scaler else None))
+            del self._failed[:-REPLAY_SIZE]
         cap = self.rotation_cap
         terms = {
             "rotation": rate if -cap <= rate <= cap else math.copysign(cap, rate),
