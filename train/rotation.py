@@ -240,6 +240,11 @@ class RotateConfig:
         "probability that a training episode restarts a start (grasp and physics) that "
         "dropped the object before in the same env (failure replay; envs.four_finger)",
     )
+    turned_prob: float = opt(
+        0.0,
+        "cube: probability that a training episode starts from a grasp with the cube turned "
+        ">= 22.5 degrees from the hand's square (envs.four_finger.cube_turn)",
+    )
     range_scale: float = opt(
         1.0,
         "with --randomize: shrink the friction, torsional, mass and gain ranges towards nominal "
@@ -325,8 +330,11 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
-    if not 0.0 <= cfg.replay_prob <= 1.0:
-        problems.append(f"--replay-prob must be in [0, 1], got {cfg.replay_prob}")
+    for flag, v in (("--replay-prob", cfg.replay_prob), ("--turned-prob", cfg.turned_prob)):
+        if not 0.0 <= v <= 1.0:
+            problems.append(f"{flag} must be in [0, 1], got {v}")
+    if cfg.turned_prob > 0 and cfg.object != "cube":
+        problems.append("--turned-prob is for --object cube")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:
@@ -389,6 +397,7 @@ def make_env(
             grip=cfg.grip,
             randomize=training_randomization(cfg) if train and physics is None else None,
             replay_prob=cfg.replay_prob if train else 0.0,
+            turned_prob=cfg.turned_prob if train else 0.0,
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
         )

@@ -159,6 +159,7 @@ FINETUNE = (
     "hard_gain",
     "latency_prob",
     "replay_prob",
+    "turned_prob",
     "range_scale",
     "validate_corners",
     "rotation_cap",

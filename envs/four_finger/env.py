@@ -123,6 +123,14 @@ physics sample) into a buffer of the last ``REPLAY_SIZE`` such starts; a reset w
 (it leaves the buffer, and comes back if it drops again). It is Prioritized Level Replay's
 idea (Jiang et al. 2021) for start states: the rare starts that a policy drops are trained
 on more often. Each env keeps its own buffer; ``p = 0`` (the default) draws nothing extra.
+
+## Turned cube starts
+
+``turned_prob=p > 0`` (cube only): a reset without ``options["grasp"]`` that does not replay
+starts, with probability ``p``, from a cached grasp whose cube is turned by at least
+``TURNED`` (22.5 degrees) from the hand's square, :func:`cube_turn`; otherwise from any grasp.
+Settled start grasps are rarely turned that far (the fingers square the cube up), and the
+robust cube's drops come from them (docs/four_finger.md).
 """
 
 from __future__ import annotations
@@ -156,6 +164,7 @@ N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
 HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
 HEIGHT_FROM = ("hold", "start")  # the height term's references: HOLD_Z, the start height
+TURNED = math.pi / 8  # [rad] turned_prob: a start with |cube_turn| >= this is "turned"
 REPLAY_SIZE = 64  # failure replay: dropped starts an env remembers (the last ones)
 
 
@@ -210,6 +219,14 @@ def z_tilt(quat_start: NDArray[np.float64], quat: NDArray[np.float64]) -> float:
     return 2.0 * math.atan2(math.sqrt(x * x + y * y), math.sqrt(w * w + z * z))
 
 
+def cube_turn(quat: NDArray[np.float64]) -> float:
+    """How far a cube with orientation ``quat`` (MuJoCo ``wxyz``, from the scene's keyframe
+    orientation) is turned about the vertical from the hand's square [rad], in
+    ``[-pi/4, pi/4]``: its twist about z (:func:`z_twist` from the identity) modulo the
+    cube's quarter-turn symmetry. 0: faces square to the fingers; +-pi/4: edge first."""
+    return math.remainder(z_twist(np.array([1.0, 0.0, 0.0, 0.0]), quat), math.pi / 2)
+
+
 class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Rotate a held object about the vertical axis with the four-finger hand.
 
@@ -232,6 +249,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     privileged : append the critic's privileged state to the observation (module doc).
     replay_prob : probability that a reset restarts a start this env dropped (module doc,
         "Failure replay"); 0: never.
+    turned_prob : probability that a reset starts from a turned cube (module doc, "Turned
+        cube starts"); 0: the cached grasps uniformly.
     grip : how the start grasps squeeze, ``"nominal"`` (the thesis' inward grip) or
         ``"firm"`` (also lifting the object and 1 N harder, verified to hold still under
         the worst randomised physics): :data:`envs.four_finger.cache.GRIPS`.
@@ -281,6 +300,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         history: int = 1,
         privileged: bool = False,
         replay_prob: float = 0.0,
+        turned_prob: float = 0.0,
     ) -> None:
         scene_name(object)
         if not isinstance(history, (int, np.integer)) or history < 1:
@@ -304,8 +324,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             or rotation_cap <= 0
         ):
             raise FourFingerError(f"rotation_cap must be > 0 (inf: no cap), got {rotation_cap!r}")
-        if not isinstance(replay_prob, (int, float)) or not 0.0 <= replay_prob <= 1.0:
-            raise FourFingerError(f"replay_prob must be in [0, 1], got {replay_prob!r}")
+        for name, v in (("replay_prob", replay_prob), ("turned_prob", turned_prob)):
+            if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+                raise FourFingerError(f"{name} must be in [0, 1], got {v!r}")
+        if turned_prob > 0 and object != "cube":
+            raise FourFingerError(f"turned_prob is for the cube, not the {object}")
         if max_setpoint_step <= 0 or timestep <= 0:
             raise FourFingerError("max_setpoint_step and timestep must be > 0")
         if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
@@ -352,6 +375,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             grip=grip,
         )
         self.grip = grip
+        self.turned_prob = float(turned_prob)
+        quats = self.grasps.qpos[:, self.physics.obj_qpos + 3 : self.physics.obj_qpos + 7]
+        self._turned = np.flatnonzero([abs(cube_turn(q)) >= TURNED for q in quats])
+        if self.turned_prob > 0 and not len(self._turned):
+            raise FourFingerError("turned_prob: no cached start grasp has the cube turned")
         self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
         lo = np.concatenate(
             [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
@@ -468,6 +496,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if i is None and self._failed and self.np_random.uniform() < self.replay_prob:
             replay = self._failed.pop(int(self.np_random.integers(len(self._failed))))
             i = replay[0]
+        if i is None and self.turned_prob > 0 and self.np_random.uniform() < self.turned_prob:
+            i = int(self._turned[self.np_random.integers(len(self._turned))])
         if i is None:
             i = int(self.np_random.integers(len(self.grasps)))
         elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):

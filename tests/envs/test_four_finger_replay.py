@@ -1,14 +1,18 @@
-"""Failure replay of the four-finger rotation env (issue 29): a start whose episode dropped
-the object comes back, with its physics read back from the MjModel, at the stated rate;
-``replay_prob=0`` changes nothing."""
+"""Start-state sampling of the four-finger rotation env (issue 29). Failure replay: a start
+whose episode dropped the object comes back, with its physics read back from the MjModel, at
+the stated rate; ``replay_prob=0`` changes nothing. Turned cube starts: the cube's turn from
+the hand's square, read from MuJoCo's ``xmat``, and the rate of turned starts."""
 
 from __future__ import annotations
 
+import math
+
+import mujoco
 import numpy as np
 import pytest
 
 from envs.four_finger import FourFingerError, FourFingerRotate, Randomization
-from envs.four_finger.env import REPLAY_SIZE
+from envs.four_finger.env import REPLAY_SIZE, TURNED, cube_turn
 from envs.four_finger.physics import DROP_Z
 from train.rotation import RotateConfig, make_env, parse_config
 
@@ -98,3 +102,50 @@ def test_cli_replays_in_training_envs_only() -> None:
     assert cfg.replay_prob == 0.3 and RotateConfig().replay_prob == 0.0
     assert make_env(cfg)().unwrapped.replay_prob == 0.3
     assert make_env(cfg, train=False)().unwrapped.replay_prob == 0.0
+
+
+@pytest.mark.parametrize("deg", [0.0, 10.0, 30.0, 44.0, 60.0, 100.0, -170.0])
+def test_cube_turn_is_the_yaw_modulo_a_quarter_turn(deg: float) -> None:
+    """A cube yawed by ``deg`` about z (and tipped a little about x first) is turned by
+    ``deg`` folded into [-45, 45] degrees."""
+    yaw, tip = math.radians(deg), 0.1
+    q_yaw = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    q_tip = np.array([math.cos(tip / 2), math.sin(tip / 2), 0.0, 0.0])
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, q_yaw, q_tip)
+    want = math.remainder(yaw, math.pi / 2)
+    assert cube_turn(q) == pytest.approx(want, abs=1e-9)
+
+
+def test_turned_starts_read_back_from_mujoco_at_the_stated_rate() -> None:
+    """``turned_prob=1``: every start's cube, its x axis read from ``data.xmat``, is turned
+    at least 22.5 degrees from the hand's square; ``0.5``: about half the starts plus half
+    the cache's own share of turned ones (400 resets, 3 sigma)."""
+    env = FourFingerRotate("cube", grip="firm", turned_prob=1.0)
+    env.reset(seed=1)
+    b = env.physics.obj_body
+    for _ in range(20):
+        env.reset()
+        x_axis = env.data.xmat[b].reshape(3, 3)[:, 0]
+        turn = math.remainder(math.atan2(x_axis[1], x_axis[0]), math.pi / 2)
+        assert abs(turn) >= TURNED - 0.02  # the start is not perfectly level
+    half = FourFingerRotate("cube", grip="firm", turned_prob=0.5)
+    share = len(half._turned) / len(half.grasps)
+    assert 0.05 < share < 0.5  # turned starts are the minority of settled grasps
+    half.reset(seed=2)
+    n = 400
+    hits = sum(half.reset()[1]["grasp"] in set(half._turned.tolist()) for _ in range(n))
+    p = 0.5 + 0.5 * share
+    assert abs(hits / n - p) < 3 * math.sqrt(p * (1 - p) / n)
+
+
+def test_turned_starts_are_refused_for_round_objects_and_bad_rates() -> None:
+    with pytest.raises(FourFingerError, match="turned_prob is for the cube"):
+        FourFingerRotate("cylinder", turned_prob=0.5)
+    with pytest.raises(FourFingerError, match="turned_prob"):
+        FourFingerRotate("cube", turned_prob=1.5)
+    with pytest.raises(SystemExit):
+        parse_config(["--turned-prob", "0.5"])  # the default object is the sphere
+    cfg = parse_config(["--object", "cube", "--turned-prob", "0.5"])
+    assert make_env(cfg)().unwrapped.turned_prob == 0.5
+    assert make_env(cfg, train=False)().unwrapped.turned_prob == 0.0
