@@ -23,6 +23,8 @@ def test_readme_states_the_default_configuration() -> None:
     assert steps == cfg.episode_steps
     cap = "uncapped" if math.isinf(u.rotation_cap) else f"capped at {u.rotation_cap:g} rad/s"
     physics = "randomised" if u.randomize is not None else "nominal"
+    if u.replay_prob == 0 and u.turned_prob == 0:
+        physics += "; start grasps uniform over the cache (no replay, no turned starts)"
     lr = f"{cfg.learning_rate:g}" + (", linear decay to 0" if cfg.lr_schedule == "linear" else "")
     rows = [
         f"| object | `{u.object}`, gravity {'on' if u.gravity else 'off'} |",
