@@ -122,7 +122,8 @@ physics sample) into a buffer of the last ``REPLAY_SIZE`` such starts; a reset w
 ``options["grasp"]`` then restarts, with probability ``p``, one of them drawn uniformly
 (it leaves the buffer, and comes back if it drops again). It is Prioritized Level Replay's
 idea (Jiang et al. 2021) for start states: the rare starts that a policy drops are trained
-on more often. Each env keeps its own buffer; ``p = 0`` (the default) draws nothing extra.
+on more often. Each env keeps its own buffer (in memory: a resumed run starts it empty);
+``p = 0`` (the default) draws nothing extra.
 
 ## Turned cube starts
 
