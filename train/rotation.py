@@ -57,6 +57,7 @@ from envs.four_finger import (
     FourFingerError,
     PhysicsSample,
     Randomization,
+    check_start_sampling,
     corners,
     grasp_cache,
 )
@@ -330,11 +331,10 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
-    for flag, v in (("--replay-prob", cfg.replay_prob), ("--turned-prob", cfg.turned_prob)):
-        if not 0.0 <= v <= 1.0:
-            problems.append(f"{flag} must be in [0, 1], got {v}")
-    if cfg.turned_prob > 0 and cfg.object != "cube":
-        problems.append("--turned-prob is for --object cube")
+    try:  # the env's own check
+        check_start_sampling(cfg.object, cfg.replay_prob, cfg.turned_prob)
+    except FourFingerError as e:
+        problems.append(f"--replay-prob, --turned-prob, --object: {e}")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
         problems.append("--eval-seconds must be > 0")
     if cfg.init_from is not None:

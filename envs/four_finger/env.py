@@ -228,6 +228,17 @@ def cube_turn(quat: NDArray[np.float64]) -> float:
     return math.remainder(z_twist(np.array([1.0, 0.0, 0.0, 0.0]), quat), math.pi / 2)
 
 
+def check_start_sampling(object: str, replay_prob: float, turned_prob: float) -> None:
+    """Raise :class:`FourFingerError` unless ``replay_prob`` and ``turned_prob`` are in
+    [0, 1] and turned starts are asked only of the cube (module doc, "Failure replay",
+    "Turned cube starts"): the env's check, also run by ``python -m train.ppo``."""
+    for name, v in (("replay_prob", replay_prob), ("turned_prob", turned_prob)):
+        if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+            raise FourFingerError(f"{name} must be in [0, 1], got {v!r}")
+    if turned_prob > 0 and object != "cube":
+        raise FourFingerError(f"turned_prob is for the cube, not the {object}")
+
+
 class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Rotate a held object about the vertical axis with the four-finger hand.
 
@@ -325,11 +336,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             or rotation_cap <= 0
         ):
             raise FourFingerError(f"rotation_cap must be > 0 (inf: no cap), got {rotation_cap!r}")
-        for name, v in (("replay_prob", replay_prob), ("turned_prob", turned_prob)):
-            if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
-                raise FourFingerError(f"{name} must be in [0, 1], got {v!r}")
-        if turned_prob > 0 and object != "cube":
-            raise FourFingerError(f"turned_prob is for the cube, not the {object}")
+        check_start_sampling(object, replay_prob, turned_prob)
         if max_setpoint_step <= 0 or timestep <= 0:
             raise FourFingerError("max_setpoint_step and timestep must be > 0")
         if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
@@ -377,10 +384,12 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self.grip = grip
         self.turned_prob = float(turned_prob)
-        quats = self.grasps.qpos[:, self.physics.obj_qpos + 3 : self.physics.obj_qpos + 7]
-        self._turned = np.flatnonzero([abs(cube_turn(q)) >= TURNED for q in quats])
-        if self.turned_prob > 0 and not len(self._turned):
-            raise FourFingerError("turned_prob: no cached start grasp has the cube turned")
+        self._turned = np.zeros(0, dtype=np.intp)  # cache indices of turned starts (turned_prob)
+        if self.turned_prob > 0:
+            quats = self.grasps.qpos[:, self.physics.obj_qpos + 3 : self.physics.obj_qpos + 7]
+            self._turned = np.flatnonzero([abs(cube_turn(q)) >= TURNED for q in quats])
+            if not len(self._turned):
+                raise FourFingerError("turned_prob: no cached start grasp has the cube turned")
         self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
         lo = np.concatenate(
             [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
@@ -504,11 +513,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):
             raise FourFingerError(f"options['grasp'] must be in [0, {len(self.grasps)}), got {i!r}")
         m, d = self.model, self.data
-        if self.randomize is not None:
-            s = replay[1] if replay is not None else None
-            if s is None:
-                s = self.randomize.sample(self.np_random, ff.NU)
-            self.scaler.apply(s)  # type: ignore[union-attr]
+        if self.randomize is not None:  # a replayed start keeps its physics (never None here)
+            s = replay[1] if replay is not None else self.randomize.sample(self.np_random, ff.NU)
+            self.scaler.apply(s)  # type: ignore[union-attr, arg-type]
         self._grasp = int(i)
         self._prev_action[:] = 0.0
         mujoco.mj_resetData(m, d)
