@@ -23,10 +23,22 @@ from train.evaluation import RotationEpisode, one_by_one, run_episodes
 from train.rotation import env_physics, policy_dir
 from train.runfiles import load_actor_critic
 
-__all__ = ["ROOT", "SHIPPED", "evaluate", "load_policy", "policy_dir"]
+__all__ = ["ROOT", "SHIPPED", "STATED_RANGES", "evaluate", "load_policy", "policy_dir"]
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "four_finger_sphere"
+
+#: The randomised physics each shipped robust policy is stated for: the factor ``S`` of
+#: ``Randomization().scaled(S)`` (friction, torsional friction and gain bounds
+#: ``1 + S (b - 1)``, mass bounds ``b**S``; latency and noise at every corner). Over it the
+#: policy keeps >= 0.5 rad/s and <= 1 drop in 20 at every corner (``python -m train.heldout
+#: POLICY --corners --range-scale S``, the policy's ``robustness_xS.csv``). A shipped policy
+#: not named here is stated for nominal physics only.
+STATED_RANGES: dict[str, float] = {
+    "four_finger_sphere_robust": 0.75,
+    "four_finger_cylinder_robust": 0.25,
+    "four_finger_cube_robust": 0.25,
+}
 
 
 def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:
