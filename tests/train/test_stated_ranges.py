@@ -19,7 +19,8 @@ ROBUST = sorted(STATED_RANGES)
 
 
 def _rows(name: str) -> list[dict[str, str]]:
-    path = ROOT / "policies" / name / f"robustness_x{STATED_RANGES[name]:g}.csv"
+    s = STATED_RANGES[name]  # the full ranges' file has no suffix (train.heldout)
+    path = ROOT / "policies" / name / ("robustness.csv" if s == 1.0 else f"robustness_x{s:g}.csv")
     with path.open() as f:
         return list(csv.DictReader(f))
 
@@ -54,15 +55,18 @@ def test_nominal_policy_meets_the_target_on_held_out_grasps(path) -> None:
 @pytest.mark.parametrize("name", ROBUST)
 def test_robust_policy_turns_at_its_slowest_stated_corner(name: str) -> None:
     """Run here, at the stated corner where the file records the lowest speed, the first two
-    test grasps (neither dropped in the file) turn the object at >= 0.5 rad/s for 20 s without
-    a drop, within 20 % of the file's mean speed there."""
+    test grasps on one env with noise seed 0 (the episodes the file's first env ran, with
+    ``python -m train.heldout``'s 10 envs) turn the object at >= 0.5 rad/s for 20 s and drop
+    exactly where the file says (neither, for every policy here), within 20 % of the file's
+    mean speed there."""
     rows = _rows(name)
     i = min(range(len(rows)), key=lambda k: float(rows[k]["speed_rad_s"]))
-    dropped = set(rows[i].get("dropped_grasps", "").split())
-    assert not dropped & {"0", "1"}
+    row = rows[i]
+    assert "dropped_grasps" in row or int(row["drops"]) == 0, "which grasps dropped is unknown"
+    want = sorted(int(g) for g in row.get("dropped_grasps", "").split() if int(g) < 2)
     act, kw = load_policy(ROOT / "policies" / name)
     corner = corners(Randomization().scaled(STATED_RANGES[name]))[i]
-    r = evaluate_heldout(act, kw, episodes=2, seconds=20.0, physics=corner, n_envs=2)
-    assert r["drops"] == 0
+    r = evaluate_heldout(act, kw, episodes=2, seconds=20.0, physics=corner, n_envs=1)
+    assert r["dropped_grasps"] == want == []
     assert r["speed_rad_s"] >= 0.5
     assert r["speed_rad_s"] == pytest.approx(float(rows[i]["speed_rad_s"]), rel=0.2)
