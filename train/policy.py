@@ -3,7 +3,8 @@
 :func:`load_policy` turns a run directory (``policy.pt`` or ``model.zip``, with
 ``vecnormalize.pkl`` and ``config.json``) into a deterministic ``obs -> action`` function
 and the env options it was trained with; :data:`SHIPPED` is the shipped four-finger policy
-(``policies/four_finger_sphere``). :func:`evaluate` runs such a function on
+(``policies/four_finger_sphere``), :data:`STATED_RANGES` the randomised physics each shipped
+robust policy is stated for. :func:`evaluate` runs such a function on
 ``FourFingerRotate`` from start grasps drawn with given seeds (the evaluation loop of
 :mod:`train.evaluation`). Used by ``python -m train.gait``, ``python -m train.rollout`` and
 the policy-based benchmarks (:mod:`train.bench`).
