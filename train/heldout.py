@@ -62,7 +62,15 @@ from train.policy import SHIPPED, load_policy
 from train.rotation import MAX_DROP_RATE, TARGET_SPEED
 from train.stats import wilson_interval
 
-__all__ = ["evaluate_heldout", "held_grasps", "main", "robustness", "still", "summarize"]
+__all__ = [
+    "csv_path",
+    "evaluate_heldout",
+    "held_grasps",
+    "main",
+    "robustness",
+    "still",
+    "summarize",
+]
 
 TEST_GRASPS = 100  # size of the held-out start-grasp set
 
@@ -191,6 +199,13 @@ def factors(r: Randomization | None = None) -> list[PhysicsSample]:
         PhysicsSample(latency=1),
         PhysicsSample(noise=(r.noise_joint, r.noise_pos, r.noise_force)),
     ]
+
+
+def csv_path(out: Path, stem: str, range_scale: float = 1.0) -> Path:
+    """Where ``--corners`` (``stem`` "robustness") or ``--factors`` ("factors") write their
+    rows: ``{stem}.csv`` for the full ranges, ``{stem}_xS.csv`` for the ranges scaled by
+    ``S = range_scale``."""
+    return out / (f"{stem}.csv" if range_scale == 1.0 else f"{stem}_x{range_scale:g}.csv")
 
 
 def still(obs: np.ndarray) -> np.ndarray:
@@ -331,8 +346,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             for r in rows
         ]
         stem = "robustness" if name == "corners" else "factors"
-        tag = "" if a.range_scale == 1.0 else f"_x{a.range_scale:g}"
-        write_csv(out / f"{stem}{tag}.csv", csv_rows, cols)
+        write_csv(csv_path(out, stem, a.range_scale), csv_rows, cols)
         for r in rows:
             print(_line(r["corner"], r))
             if a.screen:
