@@ -4,6 +4,8 @@
 - :func:`smart_shield` / :class:`SmartShield`: thesis ``Psi_smart`` (nearest safe action, exact).
 - :class:`GraspShield` (:mod:`shields.qp`, :mod:`shields.compliance`): the four-finger hand's
   linearised-compliance QP shield (thesis sec. "Constructing a shield for in-hand manipulation").
+- :class:`LookaheadShield` (:mod:`shields.lookahead`): the QP shield's criteria judged on a
+  one-step MuJoCo simulation of the action: the perfect-model yardstick, not deployable.
 """
 
 from shields.compliance import GraspLinearization, ShieldError, linearize
@@ -14,19 +16,34 @@ from shields.islands_shields import (
     simple_shield,
     smart_shield,
 )
+from shields.lookahead import Lookahead, LookaheadResult
 from shields.qp import GraspQP, ShieldLimits, ShieldResult
-from shields.wrappers import GraspShield, SimpleShield, SmartShield
+from shields.wrappers import (
+    SHIELDS,
+    GraspShield,
+    LookaheadShield,
+    SimpleShield,
+    SmartShield,
+    drop_limits,
+    make_shield,
+)
 
 __all__ = [
+    "SHIELDS",
     "GraspLinearization",
     "GraspQP",
     "GraspShield",
+    "Lookahead",
+    "LookaheadResult",
+    "LookaheadShield",
     "ShieldError",
     "ShieldLimits",
     "ShieldResult",
     "SimpleShield",
     "SmartShield",
+    "drop_limits",
     "linearize",
+    "make_shield",
     "project_disc_box",
     "project_piece_box",
     "project_union_box",

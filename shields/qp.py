@@ -82,6 +82,7 @@ from numpy.typing import NDArray
 
 from shields.compliance import GraspLinearization, ShieldError, linearize
 from shields.force_closure import force_closure_wrenches
+from shields.limits import ShieldLimits
 
 __all__ = [
     "BACKENDS",
@@ -97,53 +98,6 @@ BACKENDS = ("daqp", "osqp")
 STATUSES = ("safe", "corrected", "fallback", "no_closure")
 _INF = 1e30  # DAQP's infinity
 _TOL = 1e-6  # accepted constraint violation of a returned action under the linear model
-
-
-@dataclass(frozen=True)
-class ShieldLimits:
-    """The shield's constraints (module docstring).
-
-    c_min : least normal force of a shielded contact [N]
-    edges : edges ``k`` of the inscribed friction pyramid (>= 3)
-    box_low, box_high : object origin box, world [m] (the four-finger env drops below
-        ``z = 0.05`` or outside 0.045 m from the palm axis; the object rests at ``z`` 0.077)
-    tilt_low, tilt_high : bounds on ``r_x`` and ``r_y`` [rad]
-    relax_contacts : off (default, the thesis): a shielded contact must end the step inside
-        its constraints. On: a contact row the current state already violates (a contact
-        sliding on MuJoCo's cone lies outside the inscribed pyramid) only must not get
-        worse, as the box and tilt bounds (an ablation; docs/shields.md)
-    soft_closure : off (default): force closure of a link set is tested with point contacts
-        (the polygon's vertices only), so at least three contacts are needed. On: with the
-        torsional rays of condim-4 contacts too (soft fingers), so two fingertips can be a
-        candidate. Measured: on, the shield releases more and drops more (docs/shields.md)
-    """
-
-    c_min: float = 0.05
-    edges: int = 8
-    box_low: tuple[float, float, float] = (-0.03, -0.03, 0.06)
-    box_high: tuple[float, float, float] = (0.03, 0.03, 0.12)
-    tilt_low: float = -0.5
-    tilt_high: float = 0.5
-    relax_contacts: bool = False
-    soft_closure: bool = False
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.c_min) and self.c_min >= 0):
-            raise ShieldError(f"c_min must be a finite number >= 0 [N], got {self.c_min!r}")
-        if isinstance(self.edges, bool) or not isinstance(self.edges, int) or self.edges < 3:
-            raise ShieldError(f"edges must be an integer >= 3, got {self.edges!r}")
-        lo, hi = np.asarray(self.box_low, float), np.asarray(self.box_high, float)
-        if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo) & np.isfinite(hi)):
-            raise ShieldError("box_low and box_high must be 3 finite numbers [m]")
-        if np.any(lo >= hi):
-            raise ShieldError(f"box_low {lo.tolist()} must be below box_high {hi.tolist()}")
-        if not (np.isfinite(self.tilt_low) and np.isfinite(self.tilt_high)):
-            raise ShieldError("tilt_low and tilt_high must be finite [rad]")
-        if not -np.pi < self.tilt_low < self.tilt_high < np.pi:
-            raise ShieldError("need -pi < tilt_low < tilt_high < pi [rad]")
-        for name in ("relax_contacts", "soft_closure"):
-            if not isinstance(getattr(self, name), bool):
-                raise ShieldError(f"{name} must be True or False, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -338,6 +292,12 @@ class GraspQP:
     limits : :class:`ShieldLimits`.
     backend : ``"daqp"`` (default) or ``"osqp"``.
     object_body : the object's body name.
+    drift_steps : 0 (default, the thesis): the object's pose changes only by ``F dq``. ``H >
+        0``: it also keeps its current velocity for ``H`` policy periods, ``p' = p + H h v +
+        F_p dq`` and ``r' = r + dr (H h omega + F_r dq)`` (``v``, ``omega`` the object's linear
+        and angular velocity, world; ``h`` the horizon): the box and tilt rows then see where
+        a falling or sliding object is heading, and a bound the object violates now is
+        relaxed to its current value, not to the drifted one.
     """
 
     def __init__(
@@ -349,7 +309,11 @@ class GraspQP:
         limits: ShieldLimits | None = None,
         backend: str = "daqp",
         object_body: str = "object",
+        drift_steps: float = 0.0,
     ) -> None:
+        if not (np.isfinite(drift_steps) and drift_steps >= 0):
+            raise ShieldError(f"drift_steps must be a finite number >= 0, got {drift_steps!r}")
+        self.drift = float(drift_steps) * float(horizon)  # [s]
         if backend not in BACKENDS:
             raise ShieldError(f"unknown QP backend {backend!r}; choose one of {BACKENDS}")
         if not (np.isfinite(max_setpoint_step) and max_setpoint_step > 0):
@@ -364,6 +328,7 @@ class GraspQP:
             raise ShieldError(f"limits must be a ShieldLimits, got {type(limits).__name__}")
         self.backend = backend
         self.object_body = object_body
+        self._obj_dof = int(model.jnt_dofadr[model.body_jntadr[model.body(object_body).id]])
         self.l = model.nu
         self.ctrl_low = model.actuator_ctrlrange[:, 0].copy()
         self.ctrl_high = model.actuator_ctrlrange[:, 1].copy()
@@ -417,12 +382,22 @@ class GraspQP:
         low_c[:, 1 + k :] = fric_low - t_low
         if lim.relax_contacts:
             np.minimum(low_c, 0.0, out=low_c)  # a violated row: no worse than now
+        if not lim.friction:
+            low_c[:, 1:] = -_INF  # the normal-force rows only
         p = lin.object_pos
         r, dr = tilt_angles(lin.object_mat)
         A_g = np.concatenate([lin.F[:3], dr @ lin.F[3:]]) * s
         low_g = np.concatenate([np.asarray(lim.box_low) - p, lim.tilt_low - r])
         high_g = np.concatenate([np.asarray(lim.box_high) - p, lim.tilt_high - r])
         low_g, high_g = np.minimum(low_g, 0.0), np.maximum(high_g, 0.0)
+        if self.drift > 0:  # the object keeps its velocity; violated bounds relaxed to now
+            dof = self._obj_dof
+            v = data.qvel[dof : dof + 3]
+            w = lin.object_mat @ data.qvel[dof + 3 : dof + 6]  # body -> world
+            shift = np.concatenate([v, dr @ w]) * self.drift
+            low_g, high_g = low_g - shift, high_g + (-shift)
+        if not lim.tilt:
+            low_g[3:], high_g[3:] = -_INF, _INF
         ctrl = data.ctrl
         x_low = np.maximum(-1.0, (self.ctrl_low - ctrl) / s)
         x_high = np.minimum(1.0, (self.ctrl_high - ctrl) / s)
@@ -494,6 +469,8 @@ class GraspQP:
 
         if not finite:  # a broken state (NaN/inf in MuJoCo's data): nothing to trust
             return done(np.zeros(self.l), "fallback", 0, 0, 0, 0.0)
+        if not self.limits.contacts:  # the object's box and tilt only: one QP, all free
+            return self._global_only(prob, a, a_eff, done)
         # the agent's action: it is safe if the links whose constraints it satisfies are in
         # force closure (every candidate is a subset of that set or violated)
         tol = _TOL
@@ -532,6 +509,26 @@ class GraspQP:
         if best_x is None:
             return done(np.zeros(self.l), "fallback", 0, cands, qps, 0.0)
         return done(best_x, "corrected", best_mask, cands, qps, best_viol)
+
+    def _global_only(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray, done: Any) -> Any:
+        """``ShieldLimits(contacts=False)``: the nearest action whose predicted object pose
+        keeps the box and tilt rows (no link set, every servo free)."""
+        A, low, high = prob.A_global, prob.low_global, prob.high_global
+        y = A @ a_eff
+        if np.all(y >= low - _TOL) and np.all(y <= high + _TOL):
+            return done(a.copy(), "safe", 0, 1, 0, 0.0)
+        n = self.l
+        bl = np.concatenate([prob.x_low, np.maximum(low, -_INF)])
+        bu = np.concatenate([prob.x_high, np.minimum(high, _INF)])
+        x, _, flag, _ = daqp.solve(_eye(n), -a, np.ascontiguousarray(A), bu, bl, _sense(len(bu)))
+        if flag < 1:
+            return done(np.zeros(n), "fallback", 0, 0, 1, 0.0)
+        x = np.minimum(np.maximum(x, prob.x_low), prob.x_high)
+        yx = A @ x
+        viol = float(max(0.0, (low - yx).max(), (yx - high).max()))
+        if viol > _TOL:
+            return done(np.zeros(n), "fallback", 0, 0, 1, 0.0)
+        return done(x, "corrected", 0, 0, 1, viol)
 
     def _solve_daqp(
         self, prob: ShieldProblem, a: NDArray, a_eff: NDArray, masks: list[int]

@@ -12,7 +12,11 @@ carries
   actually taken, always inside the action box,
 - ``shield_intervened``: ``True`` when the shield changed the in-box action ``clip(a_t)`` for
   safety; clipping alone is not an intervention (a safe out-of-box action is executed as its
-  clipped value with ``shield_intervened=False``).
+  clipped value with ``shield_intervened=False``),
+- ``shield_step_seconds``: the shield's wall time in this step [s],
+- ``shield_episode_interventions``, ``shield_episode_seconds``: the interventions and the
+  shield's wall time [s] since the last reset, this step included (what a ``Monitor`` with
+  these ``info_keywords`` logs per episode).
 
 The executed action is passed on in float64 (not cast to the action space's float32) so that the
 smart shield's exact projection is not perturbed by a float32 rounding of ~1e-8.
@@ -32,6 +36,7 @@ name              meaning                                                   used
 
 from __future__ import annotations
 
+import time
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -39,10 +44,22 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from shields.compliance import ShieldError
 from shields.islands_shields import simple_shield, smart_shield
+from shields.lookahead import Lookahead, LookaheadResult
 from shields.qp import GraspQP, ShieldLimits, ShieldResult
 
-__all__ = ["GraspShield", "SimpleShield", "SmartShield"]
+__all__ = [
+    "DRIFT_STEPS",
+    "HORIZON",
+    "SHIELDS",
+    "GraspShield",
+    "LookaheadShield",
+    "SimpleShield",
+    "SmartShield",
+    "drop_limits",
+    "make_shield",
+]
 
 
 class _ShieldWrapper(gym.Wrapper):
@@ -65,6 +82,7 @@ class _ShieldWrapper(gym.Wrapper):
         #: The action box ``[low, high]`` (float64) that agent actions are clipped to.
         self._low = np.array(env.action_space.low, dtype=np.float64)
         self._high = np.array(env.action_space.high, dtype=np.float64)
+        self._episode: list[Any] = [0, 0.0]  # this episode's interventions, shield time [s]
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
         """``(a~, intervened)`` for an in-box action ``clip(a)`` in the current state."""
@@ -75,15 +93,27 @@ class _ShieldWrapper(gym.Wrapper):
         record the agent's and the executed action in ``info``."""
         agent_action = np.array(action, dtype=np.float64)
         clipped = np.minimum(np.maximum(agent_action, self._low), self._high)  # np.clip, faster
+        t0 = time.perf_counter()
         executed, intervened = self.shield(clipped)
+        seconds = time.perf_counter() - t0
+        self._episode[0] += bool(intervened)
+        self._episode[1] += seconds
         extra = self.shield_info()
         obs, reward, terminated, truncated, info = self.env.step(executed)
         info = dict(info)
         info["agent_action"] = agent_action
         info["executed_action"] = np.array(executed, dtype=np.float64)
         info["shield_intervened"] = bool(intervened)
+        info["shield_step_seconds"] = seconds
+        info["shield_episode_interventions"] = int(self._episode[0])
+        info["shield_episode_seconds"] = float(self._episode[1])
         info.update(extra)
         return obs, reward, terminated, truncated, info
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        """Reset the inner env and the episode's shield counters."""
+        self._episode = [0, 0.0]
+        return self.env.reset(**kwargs)
 
     def shield_info(self) -> dict[str, Any]:
         """Extra ``info`` entries of the last :meth:`shield` call (none by default)."""
@@ -158,12 +188,18 @@ class GraspShield(_ShieldWrapper):
     backend : QP backend, ``"daqp"`` (default, faster) or ``"osqp"``.
     limits : :class:`shields.qp.ShieldLimits` (``c_min``, friction pyramid edges, object
         box and tilt).
+    drift_steps : the object keeps its velocity for this many policy periods in the
+        prediction (:class:`shields.qp.GraspQP`; 0: the thesis' model).
     """
 
     _required = ("model", "data", "max_setpoint_step", "dt")
 
     def __init__(
-        self, env: gym.Env, backend: str = "daqp", limits: ShieldLimits | None = None
+        self,
+        env: gym.Env,
+        backend: str = "daqp",
+        limits: ShieldLimits | None = None,
+        drift_steps: float = 0.0,
     ) -> None:
         super().__init__(env)
         u = env.unwrapped
@@ -173,6 +209,7 @@ class GraspShield(_ShieldWrapper):
             horizon=float(u.dt),
             limits=limits,
             backend=backend,
+            drift_steps=drift_steps,
         )
         self.last_result: ShieldResult | None = None
 
@@ -196,3 +233,129 @@ class GraspShield(_ShieldWrapper):
             "shield_status": r.status,
             "shield_solve_time_s": r.solve_time_s,
         }
+
+
+class LookaheadShield(_ShieldWrapper):
+    """The lookahead shield (:class:`shields.lookahead.Lookahead`) around the four-finger env:
+    the QP shield's criteria judged on a one-step simulation of each candidate action, on a
+    copy of the env's MuJoCo state. It needs a simulator of the hand: the yardstick for
+    model-based shields, not a deployable controller.
+
+    ``env.unwrapped`` must expose ``model``, ``data``, ``max_setpoint_step`` [rad] and
+    ``frame_skip``; an episode with one step of action latency (randomised physics) raises
+    :class:`shields.ShieldError` (the shielded action would not be the one the step applies).
+    ``info`` carries the common keys (module docstring) and ``shield_correction``,
+    ``shield_subset``, ``shield_status`` (``"safe"``, ``"corrected"``, ``"fallback"``),
+    ``shield_solve_time_s`` as :class:`GraspShield`, plus ``shield_scale`` (``lambda``,
+    ``a~ = lambda clip(a)``), ``shield_sims`` (policy steps simulated) and ``shield_reason``
+    (why ``clip(a)`` was unsafe: ``"drop"``, ``"box"``, ``"tilt"``, ``"contacts"``, or ``""``).
+    ``shield_intervened`` is True for ``"corrected"`` and ``"fallback"``.
+
+    Parameters
+    ----------
+    env : the env.
+    limits : :class:`shields.qp.ShieldLimits`, the QP shield's.
+    bisections : bisection steps on the segment ``lambda clip(a)``, ``lambda`` in [0, 1].
+    horizon : policy steps simulated per candidate: the action, then ``horizon - 1`` with the
+        setpoints held (:class:`shields.lookahead.Lookahead`).
+    """
+
+    _required = ("model", "data", "max_setpoint_step", "frame_skip")
+
+    def __init__(
+        self,
+        env: gym.Env,
+        limits: ShieldLimits | None = None,
+        bisections: int = 3,
+        horizon: int = 1,
+    ) -> None:
+        super().__init__(env)
+        u = env.unwrapped
+        self.lookahead = Lookahead(
+            u.model,
+            max_setpoint_step=float(u.max_setpoint_step),
+            frame_skip=int(u.frame_skip),
+            limits=limits,
+            bisections=bisections,
+            horizon=horizon,
+        )
+        self.last_result: LookaheadResult | None = None
+        self._home: NDArray[np.float64] | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        """Reset the inner env; its start setpoints become the shield's home grasp."""
+        out = super().reset(**kwargs)
+        self._home = np.array(self.env.unwrapped.data.ctrl, dtype=np.float64)
+        return out
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """``(a~, intervened)`` from :class:`shields.lookahead.Lookahead` at the current
+        state."""
+        if not np.all(np.isfinite(action)):
+            return np.asarray(action, dtype=np.float64), False  # the env raises its error
+        u = self.env.unwrapped
+        scaler = getattr(u, "scaler", None)
+        if scaler is not None and scaler.current.latency:
+            raise ShieldError(
+                "LookaheadShield cannot shield an episode with action latency: the step "
+                "applies the previous action"
+            )
+        res = self.lookahead(u.data, action, self._home)
+        self.last_result = res
+        return res.action, res.status != "safe"
+
+    def shield_info(self) -> dict[str, Any]:
+        """The ``shield_*`` entries of the last step (class docstring)."""
+        r = self.last_result
+        if r is None:
+            return {}
+        return {
+            "shield_correction": r.correction,
+            "shield_subset": r.links,
+            "shield_status": r.status,
+            "shield_solve_time_s": r.solve_time_s,
+            "shield_scale": r.scale,
+            "shield_sims": r.sims,
+            "shield_reason": r.reason,
+        }
+
+
+SHIELDS: dict[str, str] = {
+    "none": "no shield",
+    "qp": "the thesis' linearised-compliance QP shield (GraspShield, ShieldLimits())",
+    "qp-drift": "the QP shield on the drop criteria (the object's box, and its tilt unless it "
+    "is the sphere; no contact rows) with the object's drift in its model (drift_steps=4)",
+    "lookahead": "the drop criteria judged by simulating the action and then holding the "
+    "setpoints for 3 more policy steps (LookaheadShield, horizon 4): the perfect-model "
+    "yardstick, needs a simulator of the hand",
+    "lookahead-qp": "the thesis' QP criteria judged by simulating the action one step "
+    "(LookaheadShield(ShieldLimits()))",
+}
+"""The shields ``python -m train.ppo --shield NAME`` trains inside (:func:`make_shield`)."""
+
+DRIFT_STEPS = 4.0  # qp-drift: policy periods the object keeps its velocity in the prediction
+HORIZON = 4  # lookahead: policy steps simulated per candidate (the action, then 3 held)
+
+
+def drop_limits(env: gym.Env) -> ShieldLimits:
+    """The drop criteria of ``qp-drift`` and ``lookahead``: the QP shield's box and tilt
+    bounds (tilt off for the sphere, whose tilt is no failure) without its contact rows
+    (``ShieldLimits(contacts=False)``); the env's termination is the lookahead's as well."""
+    return ShieldLimits(contacts=False, tilt=getattr(env.unwrapped, "object", "") != "sphere")
+
+
+def make_shield(env: gym.Env, name: str, backend: str = "daqp") -> gym.Env:
+    """``env`` inside the shield ``name`` of :data:`SHIELDS` (``"none"``: ``env`` itself);
+    ``backend``: the QP backend of ``qp`` and ``qp-drift``. Raises :class:`ShieldError` for
+    an unknown name."""
+    if name == "none":
+        return env
+    if name == "qp":
+        return GraspShield(env, backend=backend)
+    if name == "qp-drift":
+        return GraspShield(env, backend=backend, limits=drop_limits(env), drift_steps=DRIFT_STEPS)
+    if name == "lookahead":
+        return LookaheadShield(env, limits=drop_limits(env), horizon=HORIZON)
+    if name == "lookahead-qp":
+        return LookaheadShield(env)
+    raise ShieldError(f"unknown shield {name!r}; choose one of {list(SHIELDS)}")

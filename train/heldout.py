@@ -55,6 +55,7 @@ from envs.four_finger import (
     Randomization,
     corners,
 )
+from shields import make_shield
 from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train.evaluation import RotationEpisode, run_episodes
@@ -104,6 +105,7 @@ def evaluate_heldout(
     n_envs: int = 10,
     seed: int = 0,
     screen: bool = False,
+    shield: str = "none",
 ) -> dict[str, Any]:
     """``episodes`` deterministic episodes from test grasps ``0 .. episodes - 1`` (at most
     :data:`TEST_GRASPS`) under ``physics`` (nominal: ``None``); :func:`summarize` of them
@@ -114,7 +116,9 @@ def evaluate_heldout(
     sensor noise. ``screen``: start only from test grasps that hold for ``seconds`` with
     zero actions under ``physics`` (:func:`held_grasps`; module doc), the first ``episodes``
     of them; ``unheld_starts`` counts the test grasps skipped on the way (fewer episodes run
-    when fewer than ``episodes`` of the 100 hold)."""
+    when fewer than ``episodes`` of the 100 hold). ``shield``: every env inside that shield
+    (:func:`shields.make_shield`); the result then adds ``interventions_per_step`` and the
+    shield's wall time per step, ``shield_ms_median`` and ``shield_ms_p95`` [ms]."""
     if not 1 <= episodes <= TEST_GRASPS:
         raise ValueError(f"episodes must be in [1, {TEST_GRASPS}], got {episodes}")
     kw = {**env_kwargs, "grasps": "test", "n_grasps": TEST_GRASPS, "physics": physics}
@@ -125,11 +129,11 @@ def evaluate_heldout(
             return {"episodes": 0, "unheld_starts": unheld, "grasps": [], "seconds": seconds}
     n = len(grasps)
     k = max(1, min(n_envs, n))
-    envs = [FourFingerRotate(**kw) for _ in range(k)]
+    envs = [make_shield(FourFingerRotate(**kw), shield) for _ in range(k)]
     for i, env in enumerate(envs):
         env.reset(seed=seed + i)
     first = np.cumsum([0] + [(n + i) // k for i in range(k)])
-    steps = int(round(seconds / envs[0].dt))
+    steps = int(round(seconds / envs[0].unwrapped.dt))
     eps = run_episodes(
         envs,
         n,
@@ -146,6 +150,12 @@ def evaluate_heldout(
         "dropped_grasps": sorted(e["grasp"] for e in eps if e["dropped"]),
         "seconds": seconds,
     }
+    if shield != "none":
+        times = np.concatenate([e["shield_seconds"] for e in eps]) * 1e3
+        res["interventions_per_step"] = sum(e["interventions"] for e in eps) / len(times)
+        res["shield_ms_median"], res["shield_ms_p95"] = np.percentile(times, [50, 95]).tolist()
+    for e in eps:
+        e.pop("shield_seconds")
     return {**res, "unheld_starts": unheld} if screen else res
 
 
@@ -179,9 +189,18 @@ class _Recorder(RotationEpisode):
     def __init__(self, env: Any, obs: Any = None, info: dict[str, Any] | None = None) -> None:
         super().__init__(env, obs, info)
         self.grasp = int((info or {}).get("grasp", -1))
+        self.shield_seconds: list[float] = []  # the shield's wall time per step [s]
+
+    def step(
+        self, obs: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
+    ) -> bool:
+        if "shield_step_seconds" in info:
+            self.shield_seconds.append(float(info["shield_step_seconds"]))
+        return super().step(obs, reward, terminated, truncated, info)
 
     def result(self) -> dict[str, Any]:
-        return {**super().result(), "grasp": self.grasp}
+        seconds = np.array(self.shield_seconds)
+        return {**super().result(), "grasp": self.grasp, "shield_seconds": seconds}
 
 
 def factors(r: Randomization | None = None) -> list[PhysicsSample]:

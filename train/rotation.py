@@ -61,7 +61,7 @@ from envs.four_finger import (
     corners,
     grasp_cache,
 )
-from shields import GraspShield
+from shields import SHIELDS, make_shield
 from shields.qp import BACKENDS
 from stability.io import write_csv
 from train.curves import monitor_returns, plot_curve, steps_label
@@ -120,6 +120,7 @@ ENV_ID = "ihm/FourFingerRotate-v0"
 POLICY_DT = TIMESTEP * FRAME_SKIP  # [s] 0.05: the thesis' 20 Hz policy
 TARGET_SPEED = 0.5  # [rad/s] the task's target (issue 11), over 20 s episodes; drops <= 5 %
 MAX_DROP_RATE = 0.05  # the task's drop target
+SHIELD_KEYS = ("shield_episode_interventions", "shield_episode_seconds")  # monitor.csv columns
 
 
 THESIS: dict[str, Any] = {
@@ -157,11 +158,11 @@ class RotateConfig:
     )
     shield: str = opt(
         "none",
-        "shield around every env, kept for evaluation: none, or qp (shields.GraspShield, the "
-        "linearised-compliance QP shield)",
-        choices=("none", "qp"),
+        "shield around every env, kept for evaluation (shields.make_shield): "
+        + "; ".join(f"{k}: {v}" for k, v in SHIELDS.items()),
+        choices=tuple(SHIELDS),
     )
-    shield_backend: str = opt("daqp", "QP backend of --shield qp", choices=BACKENDS)
+    shield_backend: str = opt("daqp", "QP backend of --shield qp and qp-drift", choices=BACKENDS)
     total_steps: int = opt(1_200_000, "env steps to train (with --resume: steps to add)")
     seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
     n_envs: int = opt(16, "parallel training envs")
@@ -323,6 +324,8 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
         )
     if cfg.privileged_critic and cfg.shield != "none":
         problems.append("--privileged-critic cannot be combined with a --shield")
+    if cfg.shield.startswith("lookahead") and cfg.randomize and cfg.latency_prob > 0:
+        problems.append("--shield lookahead cannot shield action latency: --latency-prob 0")
     try:  # --corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale
         training_randomization(replace(cfg, randomize=True))  # Randomization's own checks
     except FourFingerError as e:
@@ -375,9 +378,10 @@ def make_env(
     physics: PhysicsSample | None = None,
 ) -> Callable[[], gym.Env]:
     """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
-    ``cfg.episode_steps``) -> :class:`shields.GraspShield` with ``--shield qp`` -> Monitor
-    when ``monitor_file`` is given; seeded with ``seeds``. Training envs (``train``) of a
-    ``--randomize`` run draw their physics per episode; ``physics`` fixes it instead."""
+    ``cfg.episode_steps``) -> the shield ``--shield`` (:func:`shields.make_shield`) -> Monitor
+    (the episode's drop and, under a shield, :data:`SHIELD_KEYS`) when ``monitor_file`` is
+    given; seeded with ``seeds``. Training envs (``train``) of a ``--randomize`` run draw their
+    physics per episode; ``physics`` fixes it instead."""
 
     def thunk() -> gym.Env:
         env = gym.make(
@@ -401,11 +405,11 @@ def make_env(
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
-        if cfg.shield == "qp":
-            env = GraspShield(env, backend=cfg.shield_backend)
+        env = make_shield(env, cfg.shield, backend=cfg.shield_backend)
         if monitor_file is not None:
+            keys = ("dropped",) if cfg.shield == "none" else ("dropped", *SHIELD_KEYS)
             env = Monitor(
-                env, filename=monitor_file, info_keywords=("dropped",), override_existing=not append
+                env, filename=monitor_file, info_keywords=keys, override_existing=not append
             )
         if seeds is not None:
             env.reset(seed=seeds.reset)
