@@ -54,6 +54,7 @@ __all__ = [
     "HORIZON",
     "SHIELDS",
     "GraspShield",
+    "GuardedShield",
     "LookaheadShield",
     "SimpleShield",
     "SmartShield",
@@ -235,6 +236,61 @@ class GraspShield(_ShieldWrapper):
         }
 
 
+class GuardedShield(GraspShield):
+    """The thesis' QP shield, engaged only near danger: a guard QP on the drop criteria
+    (:func:`drop_limits` with the box shrunk by ``margin`` on every side, the object's drift
+    over ``drift_steps`` policy periods in its model) first checks the agent's action; if
+    the guard finds it safe, it passes unchanged (``shield_status`` ``"safe"``), otherwise the
+    thesis' QP (:class:`GraspShield`'s, ``limits``) shields it. The QP shield's force-closure
+    rows then act only where the object is predicted to leave the inner box, instead of at
+    every step of the gait. ``info`` adds ``shield_guard``: whether the guard passed the action.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        backend: str = "daqp",
+        limits: ShieldLimits | None = None,
+        margin: float = 0.005,
+        drift_steps: float = 4.0,
+    ) -> None:
+        super().__init__(env, backend=backend, limits=limits)
+        if not (np.isfinite(margin) and 0 <= margin < 0.01):
+            raise ShieldError(f"margin must be in [0, 0.01) m, got {margin!r}")
+        d = drop_limits(env)
+        inner = ShieldLimits(
+            contacts=False,
+            tilt=d.tilt,
+            box_low=tuple(np.add(d.box_low, margin).tolist()),
+            box_high=tuple(np.subtract(d.box_high, margin).tolist()),
+        )
+        u = env.unwrapped
+        self.guard = GraspQP(
+            u.model,
+            max_setpoint_step=float(u.max_setpoint_step),
+            horizon=float(u.dt),
+            limits=inner,
+            backend=backend,
+            drift_steps=drift_steps,
+        )
+        self._guarded = False
+
+    def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
+        """The agent's action if the guard finds it safe, else the thesis' QP's answer."""
+        if not np.all(np.isfinite(action)):
+            return np.asarray(action, dtype=np.float64), False
+        g = self.guard(self.env.unwrapped.data, action)
+        self._guarded = g.status == "safe"
+        if self._guarded:
+            self.last_result = g
+            return g.action, False
+        return super().shield(action)
+
+    def shield_info(self) -> dict[str, Any]:
+        """:class:`GraspShield`'s entries and ``shield_guard``."""
+        return {**super().shield_info(), "shield_guard": self._guarded}
+
+
 class LookaheadShield(_ShieldWrapper):
     """The lookahead shield (:class:`shields.lookahead.Lookahead`) around the four-finger env:
     the QP shield's criteria judged on a one-step simulation of each candidate action, on a
@@ -325,6 +381,8 @@ SHIELDS: dict[str, str] = {
     "qp": "the thesis' linearised-compliance QP shield (GraspShield, ShieldLimits())",
     "qp-drift": "the QP shield on the drop criteria (the object's box, and its tilt unless it "
     "is the sphere; no contact rows) with the object's drift in its model (drift_steps=4)",
+    "qp-guard": "the thesis' QP shield engaged only where a guard QP on the drop criteria "
+    "(box shrunk by 5 mm, the object's drift over 4 steps) rejects the action (GuardedShield)",
     "lookahead": "the drop criteria judged by simulating the action and then holding the "
     "setpoints for 3 more policy steps (LookaheadShield, horizon 4): the perfect-model "
     "yardstick, needs a simulator of the hand",
@@ -354,6 +412,8 @@ def make_shield(env: gym.Env, name: str, backend: str = "daqp") -> gym.Env:
         return GraspShield(env, backend=backend)
     if name == "qp-drift":
         return GraspShield(env, backend=backend, limits=drop_limits(env), drift_steps=DRIFT_STEPS)
+    if name == "qp-guard":
+        return GuardedShield(env, backend=backend)
     if name == "lookahead":
         return LookaheadShield(env, limits=drop_limits(env), horizon=HORIZON)
     if name == "lookahead-qp":

@@ -16,7 +16,13 @@ import pytest
 
 from envs.four_finger import FourFingerRotate
 from shields.qp import BACKENDS, STATUSES
-from train.bench import shield_accuracy, shield_common, shield_effect, shield_latency
+from train.bench import (
+    shield_accuracy,
+    shield_common,
+    shield_effect,
+    shield_latency,
+    shield_models,
+)
 from train.bench.__main__ import main as bench_main
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -149,3 +155,27 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         bench_main(["shield", "latency", *args, "--steps", "0"])
     assert exc.value.code == 2
+
+
+def test_models_pairs_start_grasps_across_shields(tmp_path: Path) -> None:
+    names = ("none", "qp-thesis", "lookahead-thesis", "lookahead-drop")
+    rows = shield_models.run_models(tmp_path, seed=2, episodes=2, steps=30, agents=("random",),
+                                    variants=names, progress=False)  # fmt: skip
+    check_files(tmp_path, "models", 2 * len(names))
+    for ep in range(2):
+        sel = {r["shield"]: r for r in rows if r["episode"] == ep}
+        assert sel["none"]["interventions"] == 0 and sel["none"]["ms"] == []
+        for name in names[1:]:
+            r = sel[name]
+            assert len(r["ms"]) == r["steps"] and min(r["ms"]) > 0
+            assert sum(r["statuses"].values()) == r["steps"]
+            assert r["interventions"] == r["steps"] - r["statuses"].get("safe", 0) - r[
+                "statuses"
+            ].get("no_closure", 0)
+    summary = {s["shield"]: s for s in shield_models.summarize_models(rows)}
+    # the thesis' criteria reject random actions almost always, with either model; the
+    # drop criteria let most of them through in 30 steps
+    assert summary["qp-thesis"]["interventions_per_step"] > 0.5
+    assert summary["lookahead-thesis"]["interventions_per_step"] > 0.5
+    assert summary["lookahead-drop"]["interventions_per_step"] < 0.5
+    assert summary["lookahead-thesis"]["ms_median"] > summary["qp-thesis"]["ms_median"] > 0

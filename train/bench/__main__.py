@@ -1,5 +1,6 @@
-"""``python -m train.bench training|fidelity|transfer|shield accuracy|latency|effect``: parses
-the command line and runs the benchmark (the modules of :mod:`train.bench`)."""
+"""``python -m train.bench training|fidelity|transfer|shield MEASURE``: parses the command line
+and runs the benchmark (the modules of :mod:`train.bench`; ``MEASURE``: accuracy, latency,
+effect or models)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from train.bench import (
     shield_common,
     shield_effect,
     shield_latency,
+    shield_models,
     training,
     transfer,
 )
@@ -33,14 +35,15 @@ def build_parser() -> argparse.ArgumentParser:
         module.add_parser(sub)
     shield = sub.add_parser(
         "shield",
-        help="the QP grasp shield: accuracy, latency, effect",
+        help="the grasp shields: accuracy, latency, effect, models",
         description="Measurements of the QP grasp shield (train.bench.shield_common): accuracy "
         "(its linearisation against MuJoCo), latency (its wall time per step), effect "
-        "(episodes with and without it).",
+        "(episodes with and without it); models: its criteria judged by the QP and by the "
+        "lookahead shield (train.bench.shield_models).",
     )
     measures = shield.add_subparsers(dest="measure", required=True, metavar="MEASURE")
     common = shield_common.common_options()
-    for module in (shield_accuracy, shield_latency, shield_effect):
+    for module in (shield_accuracy, shield_latency, shield_effect, shield_models):
         module.add_parser(measures, common)
     return p
 
