@@ -21,6 +21,7 @@ from shields.qp import GraspQP, ShieldLimits, ShieldResult
 from shields.wrappers import (
     SHIELDS,
     GraspShield,
+    GuardedShield,
     LookaheadShield,
     SimpleShield,
     SmartShield,
@@ -33,6 +34,7 @@ __all__ = [
     "GraspLinearization",
     "GraspQP",
     "GraspShield",
+    "GuardedShield",
     "Lookahead",
     "LookaheadResult",
     "LookaheadShield",

@@ -164,6 +164,22 @@ class SmartShield(_ShieldWrapper):
         )
 
 
+def _grasp_qp(
+    env: gym.Env, limits: ShieldLimits | None, backend: str, drift_steps: float
+) -> GraspQP:
+    """A :class:`shields.qp.GraspQP` for the four-finger env ``env`` (its model, setpoint
+    step and policy period)."""
+    u = env.unwrapped
+    return GraspQP(
+        u.model,
+        max_setpoint_step=float(u.max_setpoint_step),
+        horizon=float(u.dt),
+        limits=limits,
+        backend=backend,
+        drift_steps=drift_steps,
+    )
+
+
 class GraspShield(_ShieldWrapper):
     """The linearised-compliance QP shield (:class:`shields.qp.GraspQP`) around the
     four-finger env (``ihm/FourFingerRotate-v0`` or any env whose ``unwrapped`` exposes
@@ -203,15 +219,7 @@ class GraspShield(_ShieldWrapper):
         drift_steps: float = 0.0,
     ) -> None:
         super().__init__(env)
-        u = env.unwrapped
-        self.qp = GraspQP(
-            u.model,
-            max_setpoint_step=float(u.max_setpoint_step),
-            horizon=float(u.dt),
-            limits=limits,
-            backend=backend,
-            drift_steps=drift_steps,
-        )
+        self.qp = _grasp_qp(env, limits, backend, drift_steps)
         self.last_result: ShieldResult | None = None
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:
@@ -264,15 +272,7 @@ class GuardedShield(GraspShield):
             box_low=tuple(np.add(d.box_low, margin).tolist()),
             box_high=tuple(np.subtract(d.box_high, margin).tolist()),
         )
-        u = env.unwrapped
-        self.guard = GraspQP(
-            u.model,
-            max_setpoint_step=float(u.max_setpoint_step),
-            horizon=float(u.dt),
-            limits=inner,
-            backend=backend,
-            drift_steps=drift_steps,
-        )
+        self.guard = _grasp_qp(env, inner, backend, drift_steps)
         self._guarded = False
 
     def shield(self, action: NDArray[Any]) -> tuple[NDArray[np.float64], bool]:

@@ -4,7 +4,8 @@ Commands: ``python -m train.ppo`` (the four-finger rotation main job; ``islands`
 the islands-and-bridges toy), ``python -m train.islands`` (the islands benchmark),
 ``python -m train.rollout`` (recorded episodes), ``python -m train.gait`` (gait strip),
 ``python -m train.compare`` (runs side by side), ``python -m train.bench <name>`` (training,
-fidelity, transfer and QP shield benchmarks).
+fidelity, transfer and grasp shield benchmarks), ``python -m train.shield_study`` (training
+with and without each shield: does a shield help the hand learn?).
 
 Modules: :mod:`~train.sb3` (SB3 plumbing the trainers share), :mod:`~train.rotation` and
 :mod:`~train.islands_ppo` (the trainers), :mod:`~train.evaluation` (the one evaluation

@@ -1,18 +1,20 @@
 """shields.qp with the study's drop criteria (ShieldLimits(contacts=False, friction=False,
 tilt=False)) and the drift model (GraspQP(drift_steps=H)): which rows exist, that the
-drift is the object's velocity read back from MuJoCo, and that a returned action keeps the
-rows it was solved for."""
+drift is the object's velocity read back from MuJoCo, that a returned action keeps the
+rows it was solved for; GuardedShield: the thesis' QP exactly where its guard rejects."""
 
 from __future__ import annotations
 
 import copy
 
 import cvxpy as cp
+import gymnasium as gym
 import mujoco
 import numpy as np
 
+import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FourFingerRotate
-from shields import ShieldLimits, drop_limits
+from shields import GuardedShield, ShieldLimits, drop_limits
 from shields.qp import GraspQP
 
 _BIG = 1e29  # the QP's "no bound" is +-1e30
@@ -84,3 +86,29 @@ def test_box_only_action_keeps_its_rows() -> None:
             cp.Problem(cp.Minimize(cp.sum_squares(x - a)), cons).solve(solver=cp.CLARABEL)
             assert res.correction <= np.linalg.norm(x.value - a) + 1e-5
     assert "safe" in seen and len(seen) >= 2, seen
+
+
+def test_guarded_shield_is_the_thesis_qp_where_the_guard_rejects() -> None:
+    env = GuardedShield(gym.make("ihm/FourFingerRotate-v0"))
+    base = env.unwrapped
+    thesis = qp_for(base)
+    rng = np.random.default_rng(5)
+    seen = set()
+    for ep in range(6):
+        env.reset(seed=ep)
+        for _ in range(15):
+            a = rng.uniform(-1, 1, 12)
+            guard = env.guard(base.data, a)
+            want = thesis(base.data, a)
+            x, intervened = env.shield(a)
+            if guard.status == "safe":
+                assert np.array_equal(x, a) and not intervened
+            else:
+                np.testing.assert_array_equal(x, want.action)
+                assert intervened == (want.status in ("corrected", "fallback"))
+            seen.add(guard.status == "safe")
+            _, _, term, _, info = env.step(a)
+            assert "shield_guard" in info
+            if term:
+                break
+    assert seen == {True, False}
