@@ -221,8 +221,8 @@ def plot(runs: Sequence[dict[str, Any]], order: Sequence[str], path: Path) -> Pa
                 n = min(len(r["drop_curve"]) for r in sel)
                 if n == 0:
                     continue
-                x = np.array([p[0] for p in sel[0]["drop_curve"][:n]])
-                y = np.array([[p[1] for p in r["drop_curve"][:n]] for r in sel])
+                x = np.array([0] + [p[0] for p in sel[0]["drop_curve"][:n]])
+                y = np.array([[0] + [p[1] for p in r["drop_curve"][:n]] for r in sel])
             a.plot(x, y.mean(axis=0), "o-", ms=3, color=color, label=label)
             a.fill_between(x, y.min(axis=0), y.max(axis=0), color=color, alpha=0.2)
         for a, key, lo, hi in ((ax[1, 0], "speed_rad_s", "speed_lo", "speed_hi"),
