@@ -44,6 +44,12 @@ smallest ``||a~ - a||`` wins, ties to the one that shields more links. For speed
 set's QP is solved first and its force closure (one more QP) tested only if its solution
 would win; the answer is the same as testing every set first.
 
+The drop criteria of the shield study (docs/shield_study.md) switch rows off:
+``ShieldLimits(contacts=False)`` keeps only the object's box and tilt (one QP over every
+servo, no link sets), ``friction=False`` keeps only the shielded contacts' normal-force rows,
+``tilt=False`` drops the tilt rows; ``GraspQP(drift_steps=H)`` adds the object's velocity
+over ``H`` policy periods to the predicted pose.
+
 Outcomes (``ShieldResult.status``):
 
 * ``"safe"``: ``a`` itself satisfies some candidate's constraints; returned unchanged.
@@ -395,7 +401,7 @@ class GraspQP:
             v = data.qvel[dof : dof + 3]
             w = lin.object_mat @ data.qvel[dof + 3 : dof + 6]  # body -> world
             shift = np.concatenate([v, dr @ w]) * self.drift
-            low_g, high_g = low_g - shift, high_g + (-shift)
+            low_g, high_g = low_g - shift, high_g - shift
         if not lim.tilt:
             low_g[3:], high_g[3:] = -_INF, _INF
         ctrl = data.ctrl
@@ -512,7 +518,8 @@ class GraspQP:
 
     def _global_only(self, prob: ShieldProblem, a: NDArray, a_eff: NDArray, done: Any) -> Any:
         """``ShieldLimits(contacts=False)``: the nearest action whose predicted object pose
-        keeps the box and tilt rows (no link set, every servo free)."""
+        keeps the box and tilt rows (no link set, every servo free; one DAQP solve whatever
+        the backend). ``"fallback"`` (zero action) when that QP is infeasible."""
         A, low, high = prob.A_global, prob.low_global, prob.high_global
         y = A @ a_eff
         if np.all(y >= low - _TOL) and np.all(y <= high + _TOL):
