@@ -4,8 +4,10 @@
 - :func:`smart_shield` / :class:`SmartShield`: thesis ``Psi_smart`` (nearest safe action, exact).
 - :class:`GraspShield` (:mod:`shields.qp`, :mod:`shields.compliance`): the four-finger hand's
   linearised-compliance QP shield (thesis sec. "Constructing a shield for in-hand manipulation").
-- :class:`LookaheadShield` (:mod:`shields.lookahead`): the QP shield's criteria judged on a
-  one-step MuJoCo simulation of the action: the perfect-model yardstick, not deployable.
+- :class:`LookaheadShield` (:mod:`shields.lookahead`): a grasp shield's criteria judged on a
+  MuJoCo simulation of the action (and, with a horizon, of holding still after it): the
+  perfect-model yardstick, not deployable. :func:`make_shield` builds the shields
+  ``python -m train.ppo --shield`` trains in (:data:`SHIELDS`).
 """
 
 from shields.compliance import GraspLinearization, ShieldError, linearize

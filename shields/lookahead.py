@@ -18,19 +18,23 @@ policy step,
    ``tilt``) its tilt angles ``(r_x, r_y)`` (:func:`shields.qp.tilt_angles`) leave the tilt
    bounds; a bound the object violates before the step is relaxed to its value then (it
    must not get worse), as in the QP, or
-3. (with ``contacts``) the grasp before the step has a force-closure set of touching links
-   (else the QP shield passes every action, ``"no_closure"``, and so does this criterion)
-   and the grasp after it has no set of at least two touching links in force closure whose
-   contacts all satisfy the QP's contact rows at the simulated contact forces: normal force
-   ``>= c_min`` and (with ``friction``) inside the inscribed friction pyramid with torsion
-   (the rows of :meth:`shields.qp.GraspQP.problem` at ``a~ = 0``).
+3. (with ``contacts``) the grasp after it has no set of at least two touching links in
+   force closure whose contacts all satisfy the QP's contact rows at the simulated contact
+   forces: normal force ``>= c_min`` and (with ``friction``) inside the inscribed friction
+   pyramid with torsion (the rows of :meth:`shields.qp.GraspQP.problem` at ``a~ = 0``).
+
+With ``contacts``, when the grasp before the step has no force-closure set of touching links
+the QP shield passes every action (``"no_closure"``); then only criterion 1 counts here.
 
 With the same :class:`~shields.qp.ShieldLimits` these are the QP shield's constraints, read
-off the simulated state instead of predicted by the linearisation: the two shields differ
-only in their model. ``horizon = H > 1`` also simulates ``H - 1`` further policy steps with
-the setpoints held after the action and asks 1 and 2 at the end of each: could the hand
-still hold the object if it stopped here? (A one-step lookahead lets a random policy loosen
-the grasp step by step until no single step can save it.)
+off the simulated state instead of predicted by the linearisation, plus the env's
+termination (1). What differs besides the model is the search: bisection on ``lambda a``
+and a home action here, the nearest action under the linear constraints in the QP.
+
+``horizon = H > 1`` also simulates ``H - 1`` further policy steps with the setpoints held
+after the action and asks 1 and 2 (1 alone without a force-closure set before the step) at
+the end of each: could the hand still hold the object if it stopped here? (A one-step
+lookahead lets a random policy loosen the grasp step by step until no single step can save it.)
 
 The search (``bisections = n``): simulate ``a``; if it is safe, return it unchanged
 (``"safe"``). Otherwise simulate the fallback ``0`` (keep every setpoint, the QP shield's
@@ -216,17 +220,22 @@ class Lookahead:
         self,
         after: mujoco.MjData,
         pose_now: tuple[NDArray[np.float64], NDArray[np.float64]],
-        closure: bool,
+        closure: bool = True,
+        contacts: bool = True,
     ) -> tuple[str, tuple[str, ...]]:
         """``(reason, links)`` for the state ``after`` a step (module docstring): reason ``""``
         when safe; ``pose_now`` the object's origin and tilt before the step; ``closure``
-        whether the grasp before it had a force-closure set."""
+        whether the grasp before it had a force-closure set (with ``limits.contacts`` and
+        without one, only the termination counts, as the QP passes every action then);
+        ``contacts=False`` skips criterion 3 (the held steps of the horizon)."""
         p, r = self._pose(after)
         if not np.all(np.isfinite(p)) or not np.all(np.isfinite(r)):
             return "drop", ()
         if p[2] < self.drop_z or math.hypot(p[0], p[1]) > self.out_radius:
             return "drop", ()
         lim = self.limits
+        if lim.contacts and not closure:
+            return "", ()
         p0, r0 = pose_now
         lo, hi = np.minimum(lim.box_low, p0), np.maximum(lim.box_high, p0)
         if np.any(p < lo - _TOL) or np.any(p > hi + _TOL):
@@ -234,7 +243,7 @@ class Lookahead:
         lo_r, hi_r = np.minimum(lim.tilt_low, r0), np.maximum(lim.tilt_high, r0)
         if lim.tilt and (np.any(r < lo_r - _TOL) or np.any(r > hi_r + _TOL)):
             return "tilt", ()
-        if not closure or not lim.contacts:
+        if not lim.contacts or not contacts:
             return "", ()
         links = self._stable_links(after)
         return ("", links) if links is not None else ("contacts", ())
@@ -258,25 +267,22 @@ class Lookahead:
             raise ShieldError(f"action contains NaN or inf: {a}")
         self.load(data)
         pose = self._pose(data)
-        closure: list[bool] = []  # computed at most once, when a verdict needs it
+        # the QP shield's test before it shields anything: without a force-closure set it
+        # passes every action, and then only the termination counts here
+        closure = self.closure_now(data) if self.limits.contacts else True
         sims = [0]
 
         def judge(x: NDArray[np.float64]) -> tuple[str, tuple[str, ...], float]:
             """(reason, links, margin): margin [m] to the drop height and the out radius."""
             after = self.simulate(data, x)
             sims[0] += 1
-            reason, links = self.verdict(after, pose, True)
+            reason, links = self.verdict(after, pose, closure)
             for _ in range(self.horizon - 1):  # then hold the setpoints: can it still hold?
                 if reason:
                     break
                 mujoco.mj_step(self.model, after, nstep=self.frame_skip)
                 sims[0] += 1
-                reason, _ = self.verdict(after, pose, False)
-            if reason == "contacts":
-                if not closure:
-                    closure.append(self.closure_now(data))
-                if not closure[0]:
-                    reason, links = "", ()
+                reason, _ = self.verdict(after, pose, closure, contacts=False)
             p = after.qpos[self._adr : self._adr + 3]
             margin = min(p[2] - self.drop_z, self.out_radius - math.hypot(p[0], p[1]))
             return reason, links, float(margin) if math.isfinite(margin) else -math.inf

@@ -301,11 +301,13 @@ class LookaheadShield(_ShieldWrapper):
     ``frame_skip``; an episode with one step of action latency (randomised physics) raises
     :class:`shields.ShieldError` (the shielded action would not be the one the step applies).
     ``info`` carries the common keys (module docstring) and ``shield_correction``,
-    ``shield_subset``, ``shield_status`` (``"safe"``, ``"corrected"``, ``"fallback"``),
-    ``shield_solve_time_s`` as :class:`GraspShield`, plus ``shield_scale`` (``lambda``,
-    ``a~ = lambda clip(a)``), ``shield_sims`` (policy steps simulated) and ``shield_reason``
-    (why ``clip(a)`` was unsafe: ``"drop"``, ``"box"``, ``"tilt"``, ``"contacts"``, or ``""``).
-    ``shield_intervened`` is True for ``"corrected"`` and ``"fallback"``.
+    ``shield_subset``, ``shield_status`` (``"safe"``, ``"corrected"``, ``"home"``,
+    ``"fallback"``), ``shield_solve_time_s`` as :class:`GraspShield`, plus ``shield_scale``
+    (``lambda``, ``a~ = lambda clip(a)``; NaN for a home action), ``shield_sims`` (policy
+    steps simulated) and ``shield_reason`` (why ``clip(a)`` was unsafe: ``"drop"``, ``"box"``,
+    ``"tilt"``, ``"contacts"``, or ``""``). ``shield_intervened`` is True for every status but
+    ``"safe"``: the agent's action was judged unsafe (also when the fallback happens to equal
+    it, a zero action).
 
     Parameters
     ----------

@@ -7,16 +7,19 @@ QP shield on the drop criteria with the object's drift, and the lookahead yardst
 study's own goes to the trainer) trains for ``--total-steps`` env steps inside the shield,
 which stays on for the validations and the final evaluation. Then, per run:
 
-- **safety while learning**: drops per 1,000 training env steps (the monitor files: an
-  episode that ended by a drop), and the cumulative drops over env steps;
+- **safety while learning**: drops per 1,000 training env steps (the monitor files: the
+  episodes that ended by a drop over the steps of the completed episodes), and the
+  cumulative drops over env steps (the 16 envs' episodes merged by their end times, which
+  the monitors count from nearly the same start);
 - **learning speed**: the env steps at which a validation (every 100k steps, 20 x 20 s)
-  first reached ``TARGET_SPEED`` (0.5 rad/s net turn), empty when none did;
+  first reached ``TARGET_SPEED`` (0.5 rad/s net turn), empty when none did (the summary
+  then counts the run's budget);
 - **result**: the kept policy (``best/``) on ``--episodes`` fresh held-out episodes of 20 s
   (test grasps no training run uses, :func:`train.heldout.evaluate_heldout`), shield on:
   net turn [rad/s] with its 95 % interval, drops with their Wilson interval;
 - **cost**: shield interventions per step (training and evaluation), the shield's wall time
-  per policy step (median and 95th percentile over the evaluation's steps [ms]), the
-  training wall time and env steps per second.
+  per policy step (mean over training, ``train_shield_ms``; median and 95th percentile over
+  the evaluation's steps [ms]), the training wall time and env steps per second.
 
 A run directory under ``--runs/<shield>/`` that already holds a finished run of that seed
 and budget is measured, not trained again; a run's measures are kept in
@@ -54,7 +57,8 @@ __all__ = ["COLUMNS", "DEFAULT_SHIELDS", "find_run", "main", "measure_run", "plo
 DEFAULT_SHIELDS = ("none", "qp", "qp-drift", "lookahead")
 COLUMNS = [
     "shield", "seed", "run", "steps", "train_minutes", "steps_per_s", "train_episodes",
-    "train_drops", "drops_per_1000", "train_interventions_per_step", "first_target_steps",
+    "train_drops", "drops_per_1000", "train_interventions_per_step", "train_shield_ms",
+    "first_target_steps",
     "episodes", "speed_rad_s", "speed_lo", "speed_hi", "drops", "drop_rate", "drop_lo",
     "drop_hi", "interventions_per_step", "shield_ms_median", "shield_ms_p95",
 ]  # fmt: skip
@@ -66,7 +70,8 @@ CURVE_BINS = 24  # points of the cumulative training-drop curve
 
 def find_run(runs: Path, shield: str, seed: int, steps: int) -> Path | None:
     """The newest finished run of ``shield`` and ``seed`` under ``runs/<shield>`` with at
-    least ``steps`` env steps (its ``eval.json`` written), or None."""
+    least ``steps`` env steps (its ``eval.json`` written; the trainer rounds the budget up to
+    whole rollouts), or None."""
     found = []
     for d in sorted((runs / shield).glob("FourFingerRotate-*")):
         try:
@@ -155,6 +160,7 @@ def measure_run(run_dir: Path, shield: str, episodes: int = TEST_GRASPS) -> dict
         "train_interventions_per_step": round(log["interventions"].sum() / steps, 4)
         if steps
         else "",
+        "train_shield_ms": round(1e3 * log["shield_s"].sum() / steps, 3) if steps else "",
         "first_target_steps": first,
         "episodes": r["episodes"],
         "speed_rad_s": round(r["speed_rad_s"], 3),

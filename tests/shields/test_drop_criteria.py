@@ -15,7 +15,7 @@ import numpy as np
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import FourFingerRotate
 from shields import GuardedShield, ShieldLimits, drop_limits
-from shields.qp import GraspQP
+from shields.qp import GraspQP, tilt_angles
 
 _BIG = 1e29  # the QP's "no bound" is +-1e30
 
@@ -62,6 +62,10 @@ def test_drift_is_the_objects_velocity() -> None:
         shift = -(ph.low_global - p0.low_global)
         np.testing.assert_allclose(shift[:3], h * env.dt * vel[3:], rtol=1e-9, atol=1e-15)
         np.testing.assert_allclose(ph.high_global[:3] - p0.high_global[:3], -shift[:3])
+        # the tilt rows: dr (the tilt gradient at the problem's orientation) times the world
+        # angular velocity; MuJoCo's is at the current orientation, d.xmat one substep older
+        _, dr = tilt_angles(d.xmat[body].reshape(3, 3))
+        np.testing.assert_allclose(shift[3:], h * env.dt * dr @ vel[:3], rtol=2e-2, atol=1e-9)
 
 
 def test_box_only_action_keeps_its_rows() -> None:

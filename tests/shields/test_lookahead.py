@@ -26,7 +26,7 @@ from shields import (
 )
 from shields.lookahead import LOOKAHEAD_STATUSES
 
-FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
+FULL = mujoco.mjtState.mjSTATE_INTEGRATION  # every state bit: the warm start and ctrl too
 
 
 def full_state(env: FourFingerRotate) -> np.ndarray:
@@ -71,7 +71,7 @@ def test_never_passes_an_action_its_simulation_marks_unsafe(limits: str) -> None
     env = FourFingerRotate()
     lim = ShieldLimits() if limits == "thesis" else drop_limits(env)
     la = shield_for(env, limits=lim, horizon=1 if limits == "thesis" else 3)
-    check = shield_for(env, limits=lim, horizon=la.horizon)  # an independent judge
+    check = shield_for(env, limits=lim, horizon=la.horizon)  # a second judge, fresh state
     seen = set()
     n, most = (12, 6) if limits == "thesis" else (16, 30)
     for _, a in random_states(env, n, seed=2, most=most):
@@ -96,6 +96,8 @@ def test_never_passes_an_action_its_simulation_marks_unsafe(limits: str) -> None
         if res.status == "fallback":  # nothing it tried was safe, the zero action included
             assert check(env.data, np.zeros(12)).status != "safe"
     assert "safe" in seen and len(seen) >= 2, seen
+    if limits == "thesis":
+        assert "corrected" in seen, seen
 
 
 def test_safe_action_unchanged_inside_the_wrapper() -> None:
@@ -207,3 +209,21 @@ def test_latency_is_refused() -> None:
     env.reset(seed=0)
     with pytest.raises(ShieldError, match="latency"):
         env.step(np.zeros(12, dtype=np.float32))
+
+
+def test_horizon_applies_when_the_contact_criterion_is_waived() -> None:
+    """With contacts on and no force-closure set before the step, only the termination
+    counts, on the action's step and on each held step of the horizon."""
+    env = FourFingerRotate()
+    la = shield_for(env, horizon=3)
+    waived = 0
+    for _, a in random_states(env, 16, seed=6, most=30):
+        if la.closure_now(env.data):
+            continue
+        waived += 1
+        res = la(env.data, a)
+        if res.status == "safe":
+            assert res.sims == 3  # the action's step and both held steps were simulated
+        else:
+            assert res.reason == "drop"
+    assert waived >= 1

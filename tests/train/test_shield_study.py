@@ -32,12 +32,13 @@ def test_study_runs_end_to_end(tmp_path: Path) -> None:
         steps, drops = int(r["steps"]), int(r["train_drops"])
         assert steps >= 1024 and int(r["episodes"]) == 2
         assert int(r["train_episodes"]) >= 1024 // 64
-        assert float(r["drops_per_1000"]) == pytest.approx(
-            1000 * drops / (int(r["train_episodes"]) and _logged_steps(runs, r)), abs=1e-3
-        )
+        episodes, dropped, logged = _monitor_counts(runs, r)
+        assert int(r["train_episodes"]) == episodes and drops == dropped
+        assert float(r["drops_per_1000"]) == pytest.approx(1000 * drops / logged, abs=1e-3)
         assert r["first_target_steps"] == ""  # 1024 steps do not turn the sphere
     none, la = rows
     assert float(none["train_interventions_per_step"]) == 0.0 and none["shield_ms_median"] == ""
+    assert float(none["train_shield_ms"]) == 0.0 and float(la["train_shield_ms"]) > 0
     assert float(la["shield_ms_median"]) > 0 and float(la["shield_ms_p95"]) >= float(
         la["shield_ms_median"]
     )
@@ -53,10 +54,16 @@ def test_study_runs_end_to_end(tmp_path: Path) -> None:
     assert len(list(runs.glob("*/FourFingerRotate-*"))) == 2
 
 
-def _logged_steps(runs: Path, row: dict[str, str]) -> int:
-    """Env steps of the completed training episodes in the run's monitor files."""
-    log = shield_study.training_log(next(runs.glob(f"*/{row['run']}")))
-    return int(log["length"].sum())
+def _monitor_counts(runs: Path, row: dict[str, str]) -> tuple[int, int, int]:
+    """Episodes, dropped episodes and env steps in the run's monitor files, read with csv."""
+    episodes = dropped = steps = 0
+    for p in next(runs.glob(f"*/{row['run']}")).glob("monitor/*.monitor.csv"):
+        lines = [ln for ln in p.read_text().splitlines() if not ln.startswith("#")]
+        for r in csv.DictReader(lines):
+            episodes += 1
+            dropped += r["dropped"] == "True"
+            steps += int(r["l"])
+    return episodes, dropped, steps
 
 
 def test_unknown_shield_is_refused(tmp_path: Path) -> None:
