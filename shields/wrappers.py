@@ -164,6 +164,19 @@ class SmartShield(_ShieldWrapper):
         )
 
 
+def _result_info(r: ShieldResult | LookaheadResult | None) -> dict[str, Any]:
+    """The ``info`` entries every grasp shield gives: ``shield_correction``,
+    ``shield_subset``, ``shield_status``, ``shield_solve_time_s`` (none before a step)."""
+    if r is None:
+        return {}
+    return {
+        "shield_correction": r.correction,
+        "shield_subset": r.links,
+        "shield_status": r.status,
+        "shield_solve_time_s": r.solve_time_s,
+    }
+
+
 def _grasp_qp(
     env: gym.Env, limits: ShieldLimits | None, backend: str, drift_steps: float
 ) -> GraspQP:
@@ -233,15 +246,7 @@ class GraspShield(_ShieldWrapper):
     def shield_info(self) -> dict[str, Any]:
         """``shield_correction``, ``shield_subset``, ``shield_status``,
         ``shield_solve_time_s`` of the last step."""
-        r = self.last_result
-        if r is None:
-            return {}
-        return {
-            "shield_correction": r.correction,
-            "shield_subset": r.links,
-            "shield_status": r.status,
-            "shield_solve_time_s": r.solve_time_s,
-        }
+        return _result_info(self.last_result)
 
 
 class GuardedShield(GraspShield):
@@ -368,10 +373,7 @@ class LookaheadShield(_ShieldWrapper):
         if r is None:
             return {}
         return {
-            "shield_correction": r.correction,
-            "shield_subset": r.links,
-            "shield_status": r.status,
-            "shield_solve_time_s": r.solve_time_s,
+            **_result_info(r),
             "shield_scale": r.scale,
             "shield_sims": r.sims,
             "shield_reason": r.reason,
