@@ -107,6 +107,8 @@ class Lookahead:
     frame_skip : physics steps per policy step.
     limits : the QP shield's :class:`shields.qp.ShieldLimits` (``c_min``, pyramid, box, tilt).
     bisections : bisection steps on the segment to the fallback (>= 0).
+    horizon : policy steps simulated per candidate, the action's and ``horizon - 1`` held
+        (>= 1; module docstring).
     drop_z, out_radius : the env's termination [m].
     object_body : the object's body name.
     """
@@ -124,16 +126,10 @@ class Lookahead:
         out_radius: float = OUT_RADIUS,
         object_body: str = "object",
     ) -> None:
-        if isinstance(frame_skip, bool) or not isinstance(frame_skip, (int, np.integer)):
-            raise ShieldError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
-        if frame_skip < 1:
-            raise ShieldError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
-        if isinstance(bisections, bool) or not isinstance(bisections, (int, np.integer)):
-            raise ShieldError(f"bisections must be an integer >= 0, got {bisections!r}")
-        if bisections < 0:
-            raise ShieldError(f"bisections must be an integer >= 0, got {bisections!r}")
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
-            raise ShieldError(f"horizon must be an integer >= 1, got {horizon!r}")
+        for name, v, least in (("frame_skip", frame_skip, 1), ("bisections", bisections, 0),
+                               ("horizon", horizon, 1)):  # fmt: skip
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+                raise ShieldError(f"{name} must be an integer >= {least}, got {v!r}")
         self.horizon = int(horizon)
         self.model = model
         self.frame_skip = int(frame_skip)

@@ -8,23 +8,29 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["monitor_returns", "plot_curve", "steps_label"]
+__all__ = ["monitor_episodes", "monitor_returns", "plot_curve", "steps_label"]
+
+
+def monitor_episodes(run_dir: Path) -> list[dict[str, str]]:
+    """Every episode row of the run's monitor files (SB3 ``Monitor``: ``r``, ``l``, ``t`` and
+    the ``info_keywords`` columns, as text), in wall-time order (``t``; each env's monitor
+    counts from nearly the same start)."""
+    rows = []
+    for p in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        with p.open() as f:
+            lines = [ln for ln in f if not ln.startswith("#")]
+        rows += list(csv.DictReader(lines))
+    return sorted(rows, key=lambda r: float(r["t"]))
 
 
 def monitor_returns(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """(cumulative env steps at each episode end, episode return) over all monitor files, in
     wall-time order."""
-    rows = []
-    for p in sorted((run_dir / "monitor").glob("*.monitor.csv")):
-        with p.open() as f:
-            lines = [ln for ln in f if not ln.startswith("#")]
-        for r in csv.DictReader(lines):
-            rows.append((float(r["t"]), float(r["r"]), int(r["l"])))
+    rows = monitor_episodes(run_dir)
     if not rows:
         return np.zeros(0), np.zeros(0)
-    rows.sort()
-    t, r, length = (np.array(c) for c in zip(*rows, strict=True))
-    return np.cumsum(length), r
+    length = np.array([int(r["l"]) for r in rows])
+    return np.cumsum(length), np.array([float(r["r"]) for r in rows])
 
 
 def steps_label(x: float) -> str:

@@ -272,13 +272,16 @@ class RotationEpisode:
     (``info["net_turn"]``: the unwrapped z twist of the object's orientation relative to its
     start, :func:`envs.four_finger.z_twist`), the summed per-step rotation about +z (the
     reward's, ``info["rotation_angle"]``), speeds = angle / (steps * dt) [rad/s], dropped
-    (the env terminated) and shield interventions (``info["shield_intervened"]``)."""
+    (the env terminated) and shield interventions (``info["shield_intervened"]``);
+    ``shield_seconds`` keeps a shield's wall time per step (``info["shield_step_seconds"]``,
+    empty without a shield) for those who report it."""
 
     def __init__(self, env: gym.Env, obs: Any = None, info: dict[str, Any] | None = None) -> None:
         self.dt = float(env.unwrapped.dt)
         self.steps = self.interventions = 0
         self.angle = self.net = 0.0
         self.dropped = False
+        self.shield_seconds: list[float] = []
 
     def step(
         self, obs: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
@@ -288,6 +291,8 @@ class RotationEpisode:
         self.net = float(info.get("net_turn", self.angle))
         self.dropped = bool(terminated)
         self.interventions += bool(info.get("shield_intervened", False))
+        if "shield_step_seconds" in info:
+            self.shield_seconds.append(float(info["shield_step_seconds"]))
         return False
 
     def result(self) -> dict[str, Any]:

@@ -189,17 +189,9 @@ class _Recorder(RotationEpisode):
     def __init__(self, env: Any, obs: Any = None, info: dict[str, Any] | None = None) -> None:
         super().__init__(env, obs, info)
         self.grasp = int((info or {}).get("grasp", -1))
-        self.shield_seconds: list[float] = []  # the shield's wall time per step [s]
-
-    def step(
-        self, obs: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
-    ) -> bool:
-        if "shield_step_seconds" in info:
-            self.shield_seconds.append(float(info["shield_step_seconds"]))
-        return super().step(obs, reward, terminated, truncated, info)
 
     def result(self) -> dict[str, Any]:
-        seconds = np.array(self.shield_seconds)
+        seconds = np.array(self.shield_seconds)  # the shield's wall time per step [s]
         return {**super().result(), "grasp": self.grasp, "shield_seconds": seconds}
 
 

@@ -48,7 +48,7 @@ from shields import SHIELDS
 from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train import rotation
-from train.curves import steps_label
+from train.curves import monitor_episodes, steps_label
 from train.heldout import TEST_GRASPS, evaluate_heldout
 from train.policy import load_policy
 
@@ -89,29 +89,18 @@ def training_log(run_dir: Path) -> dict[str, np.ndarray]:
     """Every training episode of the monitor files in wall-time order: ``steps`` (cumulative
     env steps at its end), ``dropped``, ``interventions`` and ``shield_s`` (0 without a
     shield)."""
-    rows = []
-    for p in sorted((run_dir / "monitor").glob("*.monitor.csv")):
-        with p.open() as f:
-            lines = [ln for ln in f if not ln.startswith("#")]
-        for r in csv.DictReader(lines):
-            rows.append(
-                (
-                    float(r["t"]),
-                    int(r["l"]),
-                    r.get("dropped") == "True",
-                    int(r.get("shield_episode_interventions") or 0),
-                    float(r.get("shield_episode_seconds") or 0.0),
-                )
-            )
-    rows.sort()
-    cols = list(zip(*rows, strict=True)) if rows else [(), (), (), (), ()]
-    length = np.array(cols[1], dtype=np.int64)
+    rows = monitor_episodes(run_dir)
+    length = np.array([int(r["l"]) for r in rows], dtype=np.int64)
     return {
         "length": length,
         "steps": np.cumsum(length),
-        "dropped": np.array(cols[2], dtype=bool),
-        "interventions": np.array(cols[3], dtype=np.int64),
-        "shield_s": np.array(cols[4], dtype=np.float64),
+        "dropped": np.array([r.get("dropped") == "True" for r in rows], dtype=bool),
+        "interventions": np.array(
+            [int(r.get("shield_episode_interventions") or 0) for r in rows], dtype=np.int64
+        ),
+        "shield_s": np.array(
+            [float(r.get("shield_episode_seconds") or 0.0) for r in rows], dtype=np.float64
+        ),
     }
 
 

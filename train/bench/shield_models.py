@@ -84,20 +84,18 @@ class _Episode(RotationEpisode):
 
     def __init__(self, env: gym.Env, obs: Any = None, info: dict[str, Any] | None = None) -> None:
         super().__init__(env, obs, info)
-        self.seconds: list[float] = []
         self.statuses: Counter[str] = Counter()
 
     def step(
         self, obs: Any, reward: float, terminated: bool, truncated: bool, info: dict[str, Any]
     ) -> bool:
-        if "shield_step_seconds" in info:
-            self.seconds.append(float(info["shield_step_seconds"]))
-            self.statuses[str(info.get("shield_status", ""))] += 1
+        if "shield_status" in info:
+            self.statuses[str(info["shield_status"])] += 1
         return super().step(obs, reward, terminated, truncated, info)
 
     def result(self) -> dict[str, Any]:
         r = super().result()
-        t = np.array(self.seconds) * 1e3
+        t = np.array(self.shield_seconds) * 1e3
         return {
             **r,
             "dropped_64": bool(r["dropped"] and r["steps"] <= TRAINING_EPISODE),
