@@ -104,7 +104,10 @@ optimum by more than ``RECHECK_RTOL`` relative, or above the query box's dual bo
 more than the gap; a fitted optimum below the checked first point by more than
 ``RECHECK_RTOL``; the ``status="error"`` above) shows SCIP pruning wrongly on this very
 query, so its dual bound proves nothing there: ``upper`` is None and ``certified`` False.
-Without one the bracket is SCIP's, as before the rechecks; seed 84 shows that a dual
+A recheck stopped by the time limit (``stats["recheck"]["stopped"]``, ``stats["message"]``)
+leaves SCIP's bracket, not ``certified``: under load a 120 s limit once cut seed 84's
+recheck, and its 0.250946 came back with the dual bound equal to it.
+Without either the bracket is SCIP's, as before the rechecks; seed 84 shows that a dual
 bound can be wrong, so ``certified`` is "SCIP's bound met", not a proof. A time-out's
 feasible side is SCIP's incumbent only where its point, polished, passes the same checks
 (``stats["incumbent_checked"]``); otherwise that side is None.
@@ -311,6 +314,8 @@ def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
     if sol.lower is not None and sol.upper is not None:
         width = sol.upper - sol.lower
         sol.stats["certified"] = width <= sol.stats["gap"] * max(abs(sol.upper), 1e-12) + 1e-9
+    if sol.stats.get("recheck", {}).get("stopped"):  # asked for, not done: not certified
+        sol.stats["certified"] = False
     return sol
 
 
@@ -363,6 +368,11 @@ def _recheck(data: QueryData, ex: CoulombModel, var: int | None, res: NDArray[np
                            f"contradicted by {other:.6g} in a box fitted to it, whose point "
                            f"fails the exact conditions ({e.message}); no exact optimum "
                            "can be given") from None  # fmt: skip
+            stats["recheck"]["stopped"] = e.status
+            stats["message"] = (
+                f"the recheck in a box fitted to {first:.6g} stopped ({e.message}): "
+                "the answer is SCIP's, unconfirmed"
+            )
             break
         finally:
             for k in ("mips", "mip_time_s", "nodes"):

@@ -9,7 +9,9 @@ not input order). An :class:`Outcome` is
 - ``"crashed"``: the process running it died on every one of ``1 + retries`` attempts
   (a segfault in a solver, the OOM killer, a lost node),
 - ``"killed"``: it ran longer than ``hard_timeout`` seconds and was stopped (its worker
-  process is killed and replaced; the task is not retried).
+  process is killed and replaced; the task is not retried). Locally the time counts from
+  the task's hand-over to a started worker (a fresh worker's imports are waited for first);
+  on Ray from submission.
 
 :class:`LocalExecutor` runs ``workers`` processes of its own (``forkserver`` start), one task
 at a time each, so that it knows which task a dead worker held: that task is retried on a new
@@ -34,6 +36,8 @@ from ..errors import GraspError
 
 __all__ = ["BatchError", "Executor", "LocalExecutor", "Outcome", "RayExecutor", "make_executor"]
 
+READY_S = 120.0  # the longest a fresh local worker is waited for to start [s]
+
 
 class BatchError(GraspError):
     """A batch cannot run: bad options, an unreachable Ray cluster, Ray not installed."""
@@ -57,8 +61,10 @@ def _call(fn: Callable[[Any], Any], payload: Any) -> Outcome:
 
 
 def _worker_main(conn: Connection, fn: Callable[[Any], Any]) -> None:
-    """A local worker: receive ``(key, payload)``, send ``(key, Outcome)``; ``None`` ends it."""
+    """A local worker: send ``None`` once ready (``fn`` unpickled, its imports done), then
+    receive ``(key, payload)``, send ``(key, Outcome)``; ``None`` ends it."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    conn.send(None)
     while True:
         try:
             msg = conn.recv()
@@ -118,6 +124,17 @@ class LocalExecutor(Executor):
         child.close()
         return proc, parent
 
+    @staticmethod
+    def _ready(conn: Connection) -> None:
+        """Wait (up to :data:`READY_S`) for a fresh worker's ready token, so that its start-up
+        (imports: seconds on a loaded machine) does not count against its first task's
+        ``hard_timeout``. A worker that died starting is found when it is given a task."""
+        try:
+            if conn.poll(READY_S):
+                conn.recv()
+        except (EOFError, OSError):
+            pass
+
     def _replace(
         self, pool: list[tuple[Any, Connection]], slot: int, fn: Callable[[Any], Any], kill: bool
     ) -> int | None:
@@ -129,6 +146,7 @@ class LocalExecutor(Executor):
         proc.join(timeout=5.0 if kill else 1.0)
         conn.close()
         pool[slot] = self._spawn(fn)
+        self._ready(pool[slot][1])
         return proc.exitcode
 
     def run(
@@ -137,6 +155,8 @@ class LocalExecutor(Executor):
         todo = iter(tasks)
         retry: deque[tuple[Any, Any, int]] = deque()  # (key, payload, attempts so far)
         pool = [self._spawn(fn) for _ in range(self.workers)]
+        for _, conn in pool:  # started together, then each waited for
+            self._ready(conn)
         busy: dict[int, tuple[Any, Any, int, float]] = {}  # slot -> key, payload, tries, t0
         exhausted = False
         try:

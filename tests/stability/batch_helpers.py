@@ -35,3 +35,18 @@ def sleep_on(victims: tuple[str, ...], seconds: float, task: Any) -> dict:
     if task[1] in victims:
         time.sleep(seconds)
     return solve_row(task)
+
+
+class SlowToStart:
+    """A solver whose unpickling in a fresh worker takes ``seconds`` (as heavy imports do on
+    a loaded machine); calling it solves the row."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+    def __setstate__(self, state: dict) -> None:
+        time.sleep(state["seconds"])
+        self.__dict__.update(state)
+
+    def __call__(self, task: Any) -> dict:
+        return solve_row(task)

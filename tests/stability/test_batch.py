@@ -191,6 +191,18 @@ def test_hard_timeout_stops_a_hung_query(tmp_path: Path) -> None:
     assert sum(r["status"] == "solved" for r in got.values()) == 3
 
 
+def test_a_workers_start_up_does_not_count_against_the_hard_timeout(tmp_path: Path) -> None:
+    """Each fresh worker takes 4 s to start (its solver unpickles slowly); quick queries
+    under a 3 s hard limit all solve (before: the start-up counted, and every first query
+    of a worker was killed)."""
+    q = tmp_path / "q.jsonl"
+    write_rows(q, random_rows(4, contacts=3, planar=True, seed=8))
+    with LocalExecutor(2, hard_timeout=3.0) as ex:
+        counts = run_batch(q, tmp_path / "r.jsonl", executor=ex, progress=False,
+                           solver=batch_helpers.SlowToStart(4.0))  # fmt: skip
+    assert counts.get("killed", 0) == 0 and counts["solved"] == 4
+
+
 def test_bad_rows_are_reported_by_number_and_the_rest_completes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
