@@ -128,7 +128,9 @@ class LocalExecutor(Executor):
     def _ready(conn: Connection) -> None:
         """Wait (up to :data:`READY_S`) for a fresh worker's ready token, so that its start-up
         (imports: seconds on a loaded machine) does not count against its first task's
-        ``hard_timeout``. A worker that died starting is found when it is given a task."""
+        ``hard_timeout``. A worker that died starting is found when it is given a task; the
+        token of one slower than that is skipped when it arrives (:meth:`run`), and its
+        start-up then counts against its first task."""
         try:
             if conn.poll(READY_S):
                 conn.recv()
@@ -194,12 +196,16 @@ class LocalExecutor(Executor):
                     if slot in done:
                         continue
                     done.add(slot)
-                    key, payload, tries, _ = busy.pop(slot)
+                    key, payload, tries, t0 = busy.pop(slot)
                     conn = pool[slot][1]
                     try:
                         if h is not conn or not conn.poll():
                             raise EOFError
-                        got_key, outcome = conn.recv()
+                        msg = conn.recv()
+                        if msg is None:  # a ready token later than READY_S: still running
+                            busy[slot] = (key, payload, tries, t0)
+                            continue
+                        got_key, outcome = msg
                     except (EOFError, OSError):  # the worker died holding this task
                         code = self._replace(pool, slot, fn, kill=False)
                         if tries < self.retries:

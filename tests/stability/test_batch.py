@@ -24,6 +24,7 @@ from stability.batch import (
     RayExecutor,
     decode_row,
     encode_query,
+    executors,
     map_rows,
     random_planar,
     random_rows,
@@ -200,6 +201,20 @@ def test_a_workers_start_up_does_not_count_against_the_hard_timeout(tmp_path: Pa
     with LocalExecutor(2, hard_timeout=3.0) as ex:
         counts = run_batch(q, tmp_path / "r.jsonl", executor=ex, progress=False,
                            solver=batch_helpers.SlowToStart(4.0))  # fmt: skip
+    assert counts.get("killed", 0) == 0 and counts["solved"] == 4
+
+
+def test_a_worker_slower_to_start_than_the_wait_still_answers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Workers start in 2 s, the executor waits 0.5 s for them: the late ready tokens are
+    skipped, not read as answers, and every query solves."""
+    monkeypatch.setattr(executors, "READY_S", 0.5)
+    q = tmp_path / "q.jsonl"
+    write_rows(q, random_rows(4, contacts=3, planar=True, seed=8))
+    with LocalExecutor(2, hard_timeout=30.0) as ex:
+        counts = run_batch(q, tmp_path / "r.jsonl", executor=ex, progress=False,
+                           solver=batch_helpers.SlowToStart(2.0))  # fmt: skip
     assert counts.get("killed", 0) == 0 and counts["solved"] == 4
 
 
