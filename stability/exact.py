@@ -277,7 +277,8 @@ def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
     exact point on the feasible side, its dual bound in the query's box on the other
     (MaxDisturbance: at most the cap); ``stats["certified"]`` when they meet within the
     relative ``gap`` asked. After a recheck that disagreed (``stats["recheck"]``) SCIP has
-    pruned wrongly on this query: no upper bound, not certified (module docstring)."""
+    pruned wrongly on this query: no upper bound, not certified; after one the time limit
+    stopped, SCIP's bracket stands, not certified (module docstring)."""
     if sol.stats.get("recheck", {}).get("disagreement"):
         sol.lower, sol.upper = value, None
         sol.stats["certified"] = False
