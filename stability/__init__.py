@@ -7,7 +7,7 @@
 True
 """
 
-from . import exact, gws, iterative, no_mdp, planar, refinement  # noqa: F401  (registers the methods)
+from . import exact, gws, iterative, modesearch, no_mdp, planar, refinement  # noqa: F401  (registers the methods)
 from .api import available_methods, register, solve
 from .errors import GraspError, MethodError, ModelError, SolverError
 from .grasp import Grasp
