@@ -390,25 +390,17 @@ class NodeLP:
         return NodeResult(None, None, certified=False)
 
     def safe_bound(self, y: NDArray[np.float64]) -> float:
-        """``max cost.x`` over the node's LP is at most this (module docstring, "Round-off"),
-        for the multipliers ``y`` or ``-y`` (whichever bounds tighter: the sign convention
-        of a solver's duals does not matter)."""
-        best = math.inf
-        for s in (1.0, -1.0):
-            yy = s * y
-            yy = np.where((yy > 0) & (self.rhi >= HINF), 0.0, yy)
-            yy = np.where((yy < 0) & (self.rlo <= -HINF), 0.0, yy)
-            z = self.cost - self.A.T @ yy
-            rows = np.where(yy > 0, yy * np.where(yy > 0, self.rhi, 0.0),
-                            yy * np.where(yy < 0, self.rlo, 0.0))  # fmt: skip
-            cols = np.where(z > 0, z * np.where(z > 0, self.ub, 0.0),
-                            z * np.where(z < 0, self.lb, 0.0))  # fmt: skip
-            if np.any(np.isinf(cols[z != 0])):
-                continue
-            total = float(np.sum(rows) + np.sum(cols))
-            mag = float(np.sum(np.abs(rows)) + np.sum(np.abs(cols)))
-            best = min(best, total + 1e-12 * (1.0 + mag))
-        return best
+        """``max cost.x`` over the node's LP is at most this (module docstring, "Round-off")
+        for HiGHS's row duals ``y`` (its sign convention: ``cost - A^T y`` are the reduced
+        costs), plus the round-off of the sums themselves."""
+        y = np.where(((y > 0) & (self.rhi >= HINF)) | ((y < 0) & (self.rlo <= -HINF)), 0.0, y)
+        z = self.cost - self.A.T @ y
+        cols = z * np.where(z > 0, self.ub, np.where(z < 0, self.lb, 0.0))
+        rows = y * np.where(y > 0, self.rhi, np.where(y < 0, self.rlo, 0.0))
+        if not np.all(np.isfinite(cols)):
+            return math.inf
+        total = float(np.sum(rows) + np.sum(cols))
+        return total + 1e-12 * (1.0 + float(np.sum(np.abs(rows)) + np.sum(np.abs(cols))))
 
     def infeasible_certified(self) -> bool:
         """HiGHS's dual ray ``y`` proves the node infeasible: ``y . (A x)`` over the box

@@ -6,8 +6,10 @@
 * ``mip``: ``no_mdp`` and ``iterative`` on HiGHS and SCIP;
 * ``refinement``: the thesis' table tab:data (refinement vs full resolution on one
   4-contact grasp);
-* ``grasps``: the thesis' runtime table tab:comp_data (refinement on twelve generated
-  grasps);
+* ``grasps``: the thesis' runtime table tab:comp_data (``modesearch`` and ``refinement`` on
+  twelve generated grasps);
+* ``hands``: random hand grasps, 3-6 contacts, every method's time and error against
+  ``exact``;
 * ``tradeoff``: time against error of every 3D method and setting, measured against
   ``exact``.
 

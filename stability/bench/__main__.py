@@ -8,7 +8,7 @@ import importlib
 
 from stability.cli import ArgumentParser
 
-BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff")
+BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff", "hands")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -21,7 +21,7 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--max-levels", type=int, default=9,
                     help="refinement: largest q (4 * 2^q equivalent edges)")  # fmt: skip
     ap.add_argument("--time-limit", type=float, default=None,
-                    help="seconds per query (default: refinement 120, grasps 60, "
+                    help="seconds per query (default: refinement 120, grasps, hands and "
                     "tradeoff 60)")  # fmt: skip
     ap.add_argument("--directions", type=int, default=10,
                     help="grasps: max-disturbance directions per grasp")  # fmt: skip
@@ -50,10 +50,20 @@ def parser() -> argparse.ArgumentParser:
                     "grasp:task:index (e.g. 'h:max_disturbance:9'; index from 0 within "
                     "the task); with --merge, a later file's row replaces an earlier "
                     "one's")  # fmt: skip
+    ap.add_argument("--methods", default=None,
+                    help="grasps, hands: methods to run, comma-separated, one variant each "
+                    "(default grasps modesearch,refinement; hands modesearch,refinement,exact; "
+                    "refinement with SCIP)")  # fmt: skip
+    ap.add_argument("--n", type=int, default=25, help="hands: random grasps per contact count")
+    ap.add_argument("--contacts", default=None, help="hands: contact counts (default 3,4,5,6)")
+    ap.add_argument("--exact-contacts", default=None,
+                    help="hands: contact counts exact runs on (default 3,4)")  # fmt: skip
+    ap.add_argument("--refinement-contacts", default=None,
+                    help="hands: contact counts refinement runs on (default all)")  # fmt: skip
     ap.add_argument(
         "--skip-default",
         action="store_true",
-        help="grasps: run only --backends (and --baseline), not the default",
+        help="grasps: run only --backends (and --baseline), not refinement with its default backend",
     )
     return ap
 

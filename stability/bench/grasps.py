@@ -133,16 +133,18 @@ def bench_grasps(
     directions: int = 10, wrenches: int = 10, time_limit: float = 60.0, seed: int = SEED,
     only: str | None = None, progress: bool = True, backend: str | None = None,
     levels: int | None = None, queries: set[tuple[str, str, int]] | None = None,
+    method: str = "refinement",
 ) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per solve: grasp, contacts, task, its index ``k`` within the task, time_s,
-    status, answer, bracket. With ``levels`` (refinement's ``q``; default 9) the variant is
-    named ``"... q<levels>"``; with ``queries`` (``(grasp, task, k)``) only those run."""
+    """One row per solve of ``method``: grasp, contacts, task, its index ``k`` within the
+    task, time_s, status, answer, bracket. The variant is the method's name, with its
+    ``backend`` where one is given and ``" q<levels>"`` with ``levels`` (refinement's ``q``;
+    default 9); with ``queries`` (``(grasp, task, k)``) only those run."""
     from tqdm import tqdm
 
     rows: list[dict[str, Any]] = []
     items = [x for x in grasps(seed) if only is None or x[0] in only]
     total = len(items) * (1 + directions + wrenches) if queries is None else len(queries)
-    bar = tqdm(total=total, desc="grasps", disable=not progress)
+    bar = tqdm(total=total, desc=f"grasps ({method})", disable=not progress)
     for label, g, f in items:
         for task, k, q in queries_of(label, f, directions, wrenches, seed):
             if queries is not None and (label, task, k) not in queries:
@@ -151,10 +153,11 @@ def bench_grasps(
             opts: dict[str, Any] = {} if backend is None else {"backend": backend}
             if levels is not None:
                 opts["levels"] = levels
-            sol = solve(g, q, method="refinement", time_limit=time_limit, **opts)
+            sol = solve(g, q, method=method, time_limit=time_limit, **opts)
             t = time.perf_counter() - t0
             ans = sol.value if task != "check" else sol.stable
-            variant = (backend or "default") + ("" if levels is None else f" q{levels}")
+            variant = method + ("" if backend is None else f" {backend}")
+            variant += "" if levels is None else f" q{levels}"
             rows.append({"variant": variant, "grasp": label, "contacts": g.m,
                          "task": task, "k": k, "time_s": round(t, 4), "status": sol.status,
                          "answer": ans, "lower": sol.lower, "upper": sol.upper,
@@ -400,9 +403,13 @@ def cli(args: argparse.Namespace) -> None:
     rows = []
     lv = getattr(args, "levels", None)
     qs = parse_queries(getattr(args, "queries", None))
-    if not getattr(args, "skip_default", False):
-        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, levels=lv,
-                             queries=qs)  # fmt: skip
+    methods = [m for m in (getattr(args, "methods", None) or "modesearch,refinement").split(",") if m]
+    for method in methods:
+        if method == "refinement" and getattr(args, "skip_default", False):
+            continue
+        rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only,
+                             levels=lv if method == "refinement" else None, queries=qs,
+                             method=method)  # fmt: skip
     for b in [b for b in (getattr(args, "backends", None) or "").split(",") if b]:
         rows += bench_grasps(args.directions, args.wrenches, limit, only=args.only, backend=b,
                              levels=lv, queries=qs)  # fmt: skip
@@ -410,7 +417,7 @@ def cli(args: argparse.Namespace) -> None:
         proc, out, _ = base
         proc.wait()
         rows += read_baseline(out, args.baseline)
-    mine = [r for r in rows if r["variant"] == "default"]
+    mine = [r for r in rows if r["variant"] == methods[0]]
     if mine:
         print_grasps(summary(mine))
     summ = by_contacts(rows, limit)
