@@ -88,7 +88,7 @@ __all__ = ["ModeSearchOptions", "MODESEARCH_BOUND_FACTOR"]
 MODESEARCH_BOUND_FACTOR = 1e3  # the default box, times the query's force scale
 BOX_RETRIES = 2  # tenfold enlargements of the box when an exact point shows it cut
 WEDGE = 0.3  # [rad] a sticking contact's friction wedge in a quick mode LP (Search.mode_node)
-POLISH_SHARE = 0.3  # at most this share of a search's time in dives' full polishes
+POLISH_EVERY = 30  # at most one dive's full polish per this many nodes taken
 DIVE_EVERY = 10  # polish the node's point every this many nodes (an early incumbent)
 OCTAGON = 8  # sides of the outer friction polygon at every node
 HINF = highspy.kHighsInf
@@ -717,10 +717,11 @@ class Search:
         return "done"
 
     def dive_due(self) -> bool:
-        """A full polish (:func:`slide_search`) of a node's point is due: while polishing
-        has taken less than :data:`POLISH_SHARE` of the search's time."""
-        spent = time.perf_counter() - self.t0
-        return self.polish_time <= POLISH_SHARE * spent
+        """A full polish (:func:`slide_search`) of a node's point is due: at most one per
+        :data:`POLISH_EVERY` nodes taken (a polish costs about as much as that many node
+        LPs; counted, not timed, so that a query's answer does not depend on the
+        machine's load)."""
+        return self.polishes * POLISH_EVERY <= self.popped
 
     def finish(self) -> None:
         """The incumbent made tidy (least virtual motion) and its slide angles optimised

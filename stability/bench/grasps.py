@@ -403,7 +403,9 @@ def cli(args: argparse.Namespace) -> None:
     rows = []
     lv = getattr(args, "levels", None)
     qs = parse_queries(getattr(args, "queries", None))
-    methods = [m for m in (getattr(args, "methods", None) or "modesearch,refinement").split(",") if m]
+    methods = [
+        m for m in (getattr(args, "methods", None) or "modesearch,refinement").split(",") if m
+    ]
     for method in methods:
         if method == "refinement" and getattr(args, "skip_default", False):
             continue
