@@ -106,8 +106,8 @@ def _parser() -> argparse.ArgumentParser:
         "--method",
         nargs="+",
         default=["sim"],
-        help="one or more of sim (MuJoCo), refinement, iterative, no_mdp, exact, gws "
-        "(default sim); maps are overlaid",
+        help="one or more of sim (MuJoCo), modesearch, refinement, iterative, no_mdp, exact, "
+        "gws (default sim); maps are overlaid",
     )
     mp_.add_argument(
         "--time-limit", type=float, default=None, help="seconds per solve (stability methods)"
@@ -168,8 +168,8 @@ def _parser() -> argparse.ArgumentParser:
     bt.add_argument("--plane", default="xy", help="two force axes (default xy)")
     bt.add_argument("--directions", type=int, default=36, help="directions (default 36)")
     bt.add_argument("--frame", default="world", help="axes of --plane: world or object")
-    bt.add_argument("--method", default="refinement", help="stability method written into "
-                    "each row (default refinement)")  # fmt: skip
+    bt.add_argument("--method", default="modesearch", help="stability method written into "
+                    "each row (default modesearch)")  # fmt: skip
     bt.add_argument("--preload", type=float, nargs="+", metavar="F",
                     help="commanded actuator forces (default: the scene's preload)")  # fmt: skip
     bt.add_argument("--nonbackdrivable", action="store_true", help="ratchet the motor joints")

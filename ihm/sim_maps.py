@@ -9,9 +9,9 @@ its directions (the same numbers for any number of workers). The result is a
 :class:`stability.maps.ResistibleMap` (method ``"sim"``), written as CSV and drawn on a
 polar PNG with :func:`stability.maps.plot_resistible`.
 
-Any stability method that answers MaxDisturbance on spatial grasps (``refinement``,
-``iterative``, ``no_mdp``, ``exact``, ``gws``) maps the same directions on the grasp read
-off the settled scene (:func:`ihm.contacts.grasp_from_mujoco`): the load is the same force
+Any stability method that answers MaxDisturbance on spatial grasps (``modesearch``, the
+default, ``refinement``, ``iterative``, ``no_mdp``, ``exact``, ``gws``) maps the same
+directions on the grasp read off the settled scene (:func:`ihm.contacts.grasp_from_mujoco`): the load is the same force
 through the object's centre of mass, written in the object frame as the wrench
 ``(R^T u, c x R^T u)`` about the object origin (``c`` the centre of mass in the object
 frame), the object's weight is the query's base load (``SceneGrasp.gravity_wrench``) and
@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from stability import GraspError
-from stability.api import RENAMED_METHODS
+from stability.api import DEFAULT_SPATIAL_METHOD, RENAMED_METHODS
 from stability.io import write_csv
 from stability.maps import ResistibleMap, plane_axes, plot_resistible
 
@@ -52,7 +52,7 @@ __all__ = [
     "write_map_csv",
 ]
 
-METHODS = ("sim", "refinement", "iterative", "no_mdp", "exact", "gws")
+METHODS = ("sim", "modesearch", "refinement", "iterative", "no_mdp", "exact", "gws")
 
 
 class MapError(GraspError):
@@ -218,7 +218,7 @@ def analysis_map(
     plane: str = "xy",
     directions: int = 360,
     *,
-    method: str = "refinement",
+    method: str = DEFAULT_SPATIAL_METHOD,
     preload: ArrayLike | None = None,
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
@@ -291,7 +291,7 @@ def scene_map_rows(
     plane: str = "xy",
     directions: int = 36,
     *,
-    method: str = "refinement",
+    method: str = DEFAULT_SPATIAL_METHOD,
     preload: ArrayLike | None = None,
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,

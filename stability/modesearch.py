@@ -979,8 +979,8 @@ def _solve_modesearch(grasp: Grasp, query: Any, **options: Any) -> Solution:
     cuts: list[str] = []
     for _ in range(BOX_RETRIES + 1):
         left = None if opts.time_limit is None else opts.time_limit - (time.perf_counter() - t0)
-        o = ModeSearchOptions(**{**opts.__dict__, "bound_factor": factor,
-                                 "time_limit": None if left is None else max(0.0, left)})  # fmt: skip
+        limit = None if left is None else max(0.0, left)
+        o = ModeSearchOptions(**{**opts.__dict__, "bound_factor": factor, "time_limit": limit})
         try:
             sol = _solve_once(grasp, query, o, time.perf_counter())
         except _BoxCut as e:

@@ -31,7 +31,7 @@ def _run_parser() -> ArgumentParser:
     p.add_argument(
         "--method",
         help="method for rows that name none (default: solve()'s: "
-        "planar for planar grasps, refinement for spatial ones)",
+        "planar for planar grasps, modesearch for spatial ones)",
     )
     p.add_argument(
         "--time-limit",

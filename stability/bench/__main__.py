@@ -63,7 +63,8 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--skip-default",
         action="store_true",
-        help="grasps: run only --backends (and --baseline), not refinement with its default backend",
+        help="grasps: run only --backends (and --baseline), not refinement on its default "
+        "backend",
     )
     return ap
 

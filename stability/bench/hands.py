@@ -4,7 +4,8 @@
 Queries: :func:`stability.batch.random_rows` (``query="MaxDisturbance"``: the spatial
 single-joint-finger hands of :func:`stability.examples.random_fingers` with compliant
 fingers, 1 N per finger, a random direction, cap :data:`CAP`), seed ``--seed`` plus the
-contact count. An "unstable" answer (no load along the direction holds) counts as 0. Methods (``--methods``, default ``modesearch,refinement,exact``), each limited to
+contact count. An "unstable" answer (no load along the direction holds) counts as 0.
+Methods (``--methods``, default ``modesearch,refinement,exact``), each limited to
 ``--time-limit`` seconds per query; ``--exact-contacts`` (default 3,4) limits ``exact``,
 the reference, to the counts where it can finish, and ``--refinement-contacts`` (default
 all) limits ``refinement``.
@@ -111,7 +112,8 @@ def summary(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any
                         "closed": sum(_closed(r) for r in rs),
                         "median_error": float(np.median(errs)) if errs else None,
                         "worst_error": float(np.max(errs)) if errs else None,
-                        "bound_violations": sum(bool(r["bound_violated"]) for r in rs)})  # fmt: skip
+                        "bound_violations": sum(bool(r["bound_violated"])
+                                                for r in rs)})  # fmt: skip
     return out
 
 
