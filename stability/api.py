@@ -97,8 +97,8 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
 
     ``method=None`` picks ``"planar"`` for planar grasps, :data:`DEFAULT_SPATIAL_METHOD`
     (``"modesearch"``) for spatial ones; an old name of :data:`RENAMED_METHODS`
-    (``"spatial"``, now ``"exact"``) still works and emits a ``DeprecationWarning``. ``stats["time_s"]`` is the wall time of the
-    method call [s].
+    (``"spatial"``, now ``"exact"``) still works and emits a ``DeprecationWarning``.
+    ``stats["time_s"]`` is the wall time of the method call [s].
 
     Raises
     ------
