@@ -12,11 +12,11 @@ polar PNG with :func:`stability.maps.plot_resistible`.
 Any stability method that answers MaxDisturbance on spatial grasps (``modesearch``, the
 default, ``refinement``, ``iterative``, ``no_mdp``, ``exact``, ``gws``) maps the same
 directions on the grasp read off the settled scene (:func:`ihm.contacts.grasp_from_mujoco`):
-the load is the same force through the object's centre of mass, written in the object frame as the wrench
-``(R^T u, c x R^T u)`` about the object origin (``c`` the centre of mass in the object
-frame), the object's weight is the query's base load (``SceneGrasp.gravity_wrench``) and
-the commands are the preload the scene was settled with. Directions whose solve fails
-(time-out) are NaN in the map.
+the load is the same force through the object's centre of mass, written in the object
+frame as the wrench ``(R^T u, c x R^T u)`` about the object origin (``c`` the centre of
+mass in the object frame), the object's weight is the query's base load
+(``SceneGrasp.gravity_wrench``) and the commands are the preload the scene was settled
+with. Directions whose solve fails (time-out) are NaN in the map.
 """
 
 from __future__ import annotations
