@@ -19,8 +19,15 @@ from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, OptimalCommands, Query
 from .solution import Solution
 
-__all__ = ["solve", "register", "available_methods", "method_info", "MethodInfo", "RENAMED_METHODS",
-           "DEFAULT_SPATIAL_METHOD"]
+__all__ = [
+    "solve",
+    "register",
+    "available_methods",
+    "method_info",
+    "MethodInfo",
+    "RENAMED_METHODS",
+    "DEFAULT_SPATIAL_METHOD",
+]
 
 
 @dataclass(frozen=True)

@@ -63,8 +63,7 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--skip-default",
         action="store_true",
-        help="grasps: run only --backends (and --baseline), not refinement on its default "
-        "backend",
+        help="grasps: run only --backends (and --baseline), not refinement on its default backend",
     )
     return ap
 

@@ -152,3 +152,22 @@ def test_exact_agrees_with_refinement_along_157_5_degrees() -> None:
     assert sol.status == "solved" and sol.stable
     assert "max_dissipation" in sol.conditions and "friction_cone" in sol.conditions
     assert sol.max_residual() <= 1e-7 * (1.0 + float(np.abs(sol.forces).max()))
+
+
+@pytest.mark.slow
+def test_refinement_bound_on_grasp_k_query_1_holds_the_exact_point() -> None:
+    """Benchmark grasp (k), max disturbance 1 (6 contacts; ``python -m stability.bench
+    grasps``): SCIP's presolve, through its dual reductions, declared the third round's MIP
+    optimal at 10.011 with that dual bound, and refinement reported ``upper = 10.011``,
+    where the same MIP has a point at s = 100 and an exact point (modesearch's, checked in
+    tests/stability/test_modesearch.py) holds 99.876. Without dual reductions the rounds'
+    bound is the cap, 100 (Gurobi's too)."""
+    from stability.bench import grasps as bench_grasps
+
+    label, g, f = bench_grasps.grasps()[10]
+    q = next(q for t, k, q in bench_grasps.queries_of(label, f)
+             if t == "max_disturbance" and k == 1)  # fmt: skip
+    sol = solve(g, q, method="refinement", time_limit=90)
+    rounds = sol.stats["rounds"]
+    assert len(rounds) >= 3, rounds  # the third round is the one that went wrong
+    assert sol.upper is not None and sol.upper >= 99.876
