@@ -235,6 +235,13 @@ class NodeLP:
         self.lb0, self.ub0 = self.lb.copy(), self.ub.copy()
         self.sign = 1.0 if M.maximize else -1.0  # the search maximises sign * objective
         self.cost = self.sign * np.asarray(M.objective, dtype=float)
+        if not np.any(self.cost):  # Existence: any point will do; guide the LPs towards
+            # complementary ones, min sum (c_n + u) + B sum ((f - f_c) / E + v / V): with
+            # c_n - u fixed by the motion, its least c_n + u has min(c_n, u) = 0
+            self.cost[prob.c[:, 0]] = self.cost[prob.u] = -1.0
+            for a in self.act:
+                self.cost[prob.f[a]] = -B / float(prob.bounds.excess[a])
+                self.cost[prob.v[a]] = -B / float(prob.bounds.motion[a])
         h = self.h = quiet_highs()
         for opt, val in (("presolve", "off"), ("solver", "simplex"),
                          ("primal_feasibility_tolerance", 1e-9),

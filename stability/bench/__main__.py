@@ -8,7 +8,7 @@ import importlib
 
 from stability.cli import ArgumentParser
 
-BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff", "hands")
+BENCHMARKS = ("planar", "mip", "refinement", "grasps", "tradeoff", "hands", "nodelp")
 
 
 def parser() -> argparse.ArgumentParser:
