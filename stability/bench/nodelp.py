@@ -51,10 +51,10 @@ def record(label: str, k: int, limit: int) -> list[dict[str, Any]]:
         if len(lps) < limit:
             h = self.h
             ok = h.getModelStatus() == modesearch._OPT
+            val = h.getInfo().objective_function_value if ok else None
             lps.append({"A": self.A.copy(), "rlo": self.rlo.copy(), "rhi": self.rhi.copy(),
                         "lb": self.lb.copy(), "ub": self.ub.copy(), "cost": self.cost.copy(),
-                        "optimal": ok,
-                        "objective": h.getInfo().objective_function_value if ok else None})  # fmt: skip
+                        "optimal": ok, "objective": val})  # fmt: skip
         return out
 
     modesearch.NodeLP.solve = recording
