@@ -850,7 +850,11 @@ class _BoxCut(Exception):
     """The best exact point lies at or beyond the box: the bound may not hold."""
 
 
-def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float) -> Solution:
+def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
+                last: bool) -> Solution:  # fmt: skip
+    """One search in the box of ``opts.bound_factor``; :class:`_BoxCut` when the box may
+    have cut the optimum off, unless ``last``: then the answer keeps its exact point and
+    has no proven bound (``stats["box_reached"]``)."""
     data = QueryData.of(grasp, query, 100.0)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"bound_factor": opts.bound_factor}
@@ -884,10 +888,16 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float) ->
                   else search.root_bound * lp.sign})  # fmt: skip
     upper = search.upper()
     best = search.best
-    if best is not None and _box_reached(ex, best[0]):
-        raise _BoxCut("the best exact point reaches the box")
+    cut = None
+    if best is not None and not existence and _box_reached(ex, best[0]):
+        cut = "the best exact point reaches the box"
     if best is not None and upper is not None and best[1] > upper + 1e-7 * (1 + abs(upper)):
-        raise _BoxCut(f"exact value {best[1]} beyond the proven bound {upper}")
+        cut = f"exact value {best[1]} beyond the proven bound {upper}"
+    if cut is not None and not last:
+        raise _BoxCut(cut)
+    if cut is not None:  # the bound holds only within the box, which the answer reaches
+        stats["box_reached"] = cut
+        upper = None
     closed = outcome == "done" and not search.unresolved
     if existence:
         if best is not None:
@@ -984,12 +994,12 @@ def _solve_modesearch(grasp: Grasp, query: Any, **options: Any) -> Solution:
     t0 = time.perf_counter()
     factor = opts.bound_factor
     cuts: list[str] = []
-    for _ in range(BOX_RETRIES + 1):
+    for k in range(BOX_RETRIES + 1):
         left = None if opts.time_limit is None else opts.time_limit - (time.perf_counter() - t0)
         limit = None if left is None else max(0.0, left)
         o = ModeSearchOptions(**{**opts.__dict__, "bound_factor": factor, "time_limit": limit})
         try:
-            sol = _solve_once(grasp, query, o, time.perf_counter())
+            sol = _solve_once(grasp, query, o, time.perf_counter(), k == BOX_RETRIES)
         except _BoxCut as e:
             cuts.append(f"bound_factor {factor:g}: {e}")
             factor *= 10.0
@@ -997,6 +1007,4 @@ def _solve_modesearch(grasp: Grasp, query: Any, **options: Any) -> Solution:
         if cuts:
             sol.stats["box_enlarged"] = cuts
         return sol
-    return Solution(None, "modesearch", grasp, query, status="error",
-                    stats={"message": "the box cut the optimum off at every bound tried: "
-                           f"{cuts}", "box_enlarged": cuts})  # fmt: skip
+    raise AssertionError("unreachable: the last box returns its answer")
