@@ -38,7 +38,7 @@ QUERIES = (("a", 0), ("f", 0), ("j", 0), ("l", 0))
 def record(label: str, k: int, limit: int) -> list[dict[str, Any]]:
     """The first ``limit`` node LPs of modesearch on the max disturbance ``k`` of grasp
     ``label``: per LP its matrix, row and column bounds, objective, and HiGHS's result."""
-    from .. import modesearch
+    from ..modesearch import node as modesearch
 
     g, f = next((g, f) for lab, g, f in bench_grasps.grasps() if lab == label)
     q = next(q for t, kk, q in bench_grasps.queries_of(label, f)
@@ -50,7 +50,7 @@ def record(label: str, k: int, limit: int) -> list[dict[str, Any]]:
         out = original(self, node)
         if len(lps) < limit:
             h = self.h
-            ok = h.getModelStatus() == modesearch._OPT
+            ok = h.getModelStatus() == modesearch.OPTIMAL
             val = h.getInfo().objective_function_value if ok else None
             lps.append({"A": self.A.copy(), "rlo": self.rlo.copy(), "rhi": self.rhi.copy(),
                         "lb": self.lb.copy(), "ub": self.ub.copy(), "cost": self.cost.copy(),

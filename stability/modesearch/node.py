@@ -1,0 +1,312 @@
+"""The node LP of :mod:`stability.modesearch`: one persistent HiGHS model of the relaxation,
+its bounds and arc rows set per node, with a safe bound from the duals and a checked proof
+of infeasibility (the package docstring states the relaxation)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import highspy
+import numpy as np
+from numpy.typing import NDArray
+
+from .._lp import quiet_highs
+from ..model.coulomb import CoulombModel
+from ..model.query import QueryData
+
+__all__ = ["HINF", "INFEASIBLE", "OPTIMAL", "Node", "NodeLP", "NodeResult", "TWO_PI"]
+
+OCTAGON = 8  # sides of the outer friction polygon at every node
+HINF = highspy.kHighsInf
+OPTIMAL = highspy.HighsModelStatus.kOptimal
+INFEASIBLE = (highspy.HighsModelStatus.kInfeasible,)
+TWO_PI = 2.0 * math.pi
+
+
+# A node: per contact the normal state ("U", "C", "O"), per contact the tangential state
+# (kind, arc) with kind "U" (undecided), "S" (stick) or "A" (slide) and arc (start, width)
+# [rad] or None, per actuator "U", "L" (locked) or "M" (moving).
+Node = tuple[tuple[str, ...], tuple[tuple[str, tuple[float, float] | None], ...], tuple[str, ...]]
+
+
+@dataclass
+class NodeResult:
+    """One node LP: ``bound`` a safe bound on the node's objective (the search maximises),
+    ``x`` the LP point (None: infeasible), ``certified`` False where an infeasible node's
+    proof could not be checked (it then keeps its parent's bound)."""
+
+    bound: float | None
+    x: NDArray[np.float64] | None
+    certified: bool = True
+
+
+class NodeLP:
+    """The relaxation of one query as one persistent HiGHS LP whose bounds and arc rows
+    change from node to node (module docstring). Variables are those of ``ex`` (a
+    :class:`CoulombModel` with the query added): its linear rows, the hulls of its
+    indicators, the outer octagon of each cone and eight arc rows per contact."""
+
+    def __init__(self, ex: CoulombModel, data: QueryData) -> None:
+        self.ex, self.prob = ex, ex.prob
+        prob, M, g = ex.prob, ex.prob.model, ex.grasp
+        self.m = g.m
+        self.mu = np.asarray(g.mu, dtype=float)
+        B = prob.bounds.force
+        n = M.n_vars
+        lb, ub = np.array(M.lb, dtype=float), np.array(M.ub, dtype=float)
+        lb[prob.y], ub[prob.y] = 0.0, 0.0  # binaries: their rows are the hulls below
+        self.has_hand = prob.hand is not None
+        if self.has_hand:
+            lb[prob.z], ub[prob.z] = 0.0, 0.0
+            # a backdrivable transmission moves freely: boxed by the joints' box through R
+            qbox = ub[prob.q]
+            for a in np.flatnonzero(prob.backdrivable):
+                lim = float(np.abs(prob.hand[0][:, a]) @ qbox)
+                lb[prob.v[a]], ub[prob.v[a]] = -lim, lim
+        rows: list[tuple[list[int], list[float], float, float]] = []
+        for r in M.rows:
+            rows.append((r.idx.tolist(), r.val.tolist(), r.lo, r.hi))
+        for i in range(self.m):  # hull of c_n u = 0 in [0, B]^2
+            rows.append(([int(prob.c[i, 0]), int(prob.u[i])], [1.0, 1.0], -HINF, B))
+        self.act: list[int] = []  # nonbackdrivable actuators: the branched ones
+        self.excess_row: dict[int, int] = {}
+        if self.has_hand:
+            R = prob.hand[0]
+            E, V = prob.bounds.excess, prob.bounds.motion
+            names = {r.name: k for k, r in enumerate(M.rows)}
+            for a in range(R.shape[1]):
+                if prob.backdrivable[a]:
+                    continue
+                self.act.append(a)
+                f, v = int(prob.f[a]), int(prob.v[a])
+                if prob.fc is None:  # (f - f_c) / E + v / V <= 1, f_c the command
+                    fc = float(prob.hand[1][a])
+                    rows.append(([f, v], [1.0 / E[a], 1.0 / V[a]], -HINF, 1.0 + fc / E[a]))
+                else:
+                    fcv = int(prob.fc[a])
+                    rows.append(([f, fcv, v], [1.0 / E[a], -1.0 / E[a], 1.0 / V[a]], -HINF, 1.0))
+                    self.excess_row[a] = names[f"excess{a}"]
+        self.cone0 = len(rows)
+        for i in range(self.m):  # outer octagon of the cone: e . c_t - mu c_n <= 0
+            ci, ti = int(prob.c[i, 0]), [int(j) for j in prob.c[i, 1:]]
+            for th in TWO_PI * np.arange(OCTAGON) / OCTAGON:
+                rows.append(([ti[0], ti[1], ci], [math.cos(th), math.sin(th), -self.mu[i]],
+                             -HINF, 0.0))  # fmt: skip
+        self.arc0 = len(rows)
+        for i in range(self.m):  # 8 arc rows per contact, free until a node sets them
+            ci, ti = int(prob.c[i, 0]), [int(j) for j in prob.c[i, 1:]]
+            di = [int(j) for j in ex.dt[i]]
+            for k in range(8):
+                idx = di if k in (2, 3) else ti + ([ci] if k >= 4 else [])
+                rows.append((idx, [1.0] * len(idx), -HINF, HINF))
+        nr = len(rows)
+        A = np.zeros((nr, n))
+        rlo, rhi = np.empty(nr), np.empty(nr)
+        for k, (idx, val, lo, hi) in enumerate(rows):
+            A[k, idx] = val
+            rlo[k], rhi[k] = (-HINF if lo == -math.inf else lo), (HINF if hi == math.inf else hi)
+        self.A, self.rlo, self.rhi = A, rlo, rhi
+        self.lb, self.ub = np.where(np.isinf(lb), -HINF, lb), np.where(np.isinf(ub), HINF, ub)
+        self.lb0, self.ub0 = self.lb.copy(), self.ub.copy()
+        self.sign = 1.0 if M.maximize else -1.0  # the search maximises sign * objective
+        self.cost = self.sign * np.asarray(M.objective, dtype=float)
+        if not np.any(self.cost):  # Existence: any point will do; guide the LPs towards
+            # complementary ones, min sum (c_n + u) + B sum ((f - f_c) / E + v / V): with
+            # c_n - u fixed by the motion, its least c_n + u has min(c_n, u) = 0
+            self.cost[prob.c[:, 0]] = self.cost[prob.u] = -1.0
+            for a in self.act:
+                self.cost[prob.f[a]] = -B / float(prob.bounds.excess[a])
+                self.cost[prob.v[a]] = -B / float(prob.bounds.motion[a])
+        h = self.h = quiet_highs()
+        for opt, val in (("presolve", "off"), ("solver", "simplex"),
+                         ("primal_feasibility_tolerance", 1e-9),
+                         ("dual_feasibility_tolerance", 1e-9)):  # fmt: skip
+            h.setOptionValue(opt, val)
+        lp = highspy.HighsLp()
+        lp.num_col_, lp.num_row_ = n, nr
+        lp.col_cost_, lp.col_lower_, lp.col_upper_ = self.cost, self.lb, self.ub
+        lp.row_lower_, lp.row_upper_ = rlo, rhi
+        lp.sense_ = highspy.ObjSense.kMaximize
+        nz_c, nz_r = np.nonzero(A.T)
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+        lp.a_matrix_.start_ = np.concatenate([[0], np.cumsum(np.bincount(nz_c, minlength=n))])
+        lp.a_matrix_.index_ = nz_r.astype(np.int32)
+        lp.a_matrix_.value_ = A.T[nz_c, nz_r]
+        lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, nr
+        h.passModel(lp)
+        self.n = n
+        a_count = len(self.act)
+        self.cur: Node = (("U",) * self.m, (("U", None),) * self.m, ("U",) * a_count)
+        self.lp_count, self.lp_time, self.iterations = 0, 0.0, 0
+
+    # ---------------------------------------------------------------- node state
+
+    def root(self) -> Node:
+        return (("U",) * self.m, (("U", None),) * self.m, ("U",) * len(self.act))
+
+    def _col(self, j: int, lo: float, hi: float) -> None:
+        j = int(j)
+        if self.lb[j] != lo or self.ub[j] != hi:
+            self.lb[j], self.ub[j] = lo, hi
+            self.h.changeColBounds(j, lo, hi)
+
+    def _row(self, r: int, lo: float, hi: float) -> None:
+        if self.rlo[r] != lo or self.rhi[r] != hi:
+            self.rlo[r], self.rhi[r] = lo, hi
+            self.h.changeRowBounds(r, lo, hi)
+
+    def _coef(self, r: int, j: int, v: float) -> None:
+        j = int(j)
+        if self.A[r, j] != v:
+            self.A[r, j] = v
+            self.h.changeCoeff(r, j, v)
+
+    def _set_normal(self, i: int, st: str) -> None:
+        p = self.prob
+        cn, u = int(p.c[i, 0]), int(p.u[i])
+        self._col(cn, 0.0, 0.0 if st == "O" else self.ub0[cn])
+        self._col(u, 0.0, 0.0 if st == "C" else self.ub0[u])
+
+    def _set_tan(self, i: int, st: tuple[str, tuple[float, float] | None]) -> None:
+        ex = self.ex
+        kind, arc = st
+        for j in ex.dt[i]:
+            j = int(j)
+            if kind in ("S", "I"):
+                self._col(j, 0.0, 0.0)
+            else:
+                self._col(j, self.lb0[j], self.ub0[j])
+        r0 = self.arc0 + 8 * i
+        if arc is None:
+            for k in range(8):
+                self._row(r0 + k, -HINF, HINF)
+            return
+        a, w = arc
+        b = a + w
+        mid = a + 0.5 * w
+        na, nb = (-math.sin(a), math.cos(a)), (math.sin(b), -math.cos(b))
+        mm = (math.cos(mid), math.sin(mid))
+        ea, eb = (math.cos(a), math.sin(a)), (math.cos(b), math.sin(b))
+        mu = float(self.mu[i])
+        p = self.prob
+        ci, ti = int(p.c[i, 0]), p.c[i, 1:]
+        di = ex.dt[i]
+        # rows: n_a.c_t >= 0, n_b.c_t >= 0, n_a.(-d_t) >= 0, n_b.(-d_t) >= 0,
+        # m.c_t - mu cos(w/2) c_n >= 0 (the chord), m.c_t, e_a.c_t, e_b.c_t <= mu c_n
+        spec = [(ti, na, None), (ti, nb, None), (di, (-na[0], -na[1]), None),
+                (di, (-nb[0], -nb[1]), None), (ti, mm, -mu * math.cos(0.5 * w)),
+                (ti, mm, -mu), (ti, ea, -mu), (ti, eb, -mu)]  # fmt: skip
+        if kind == "I":  # inscribed: c_t within the chord, m.c_t <= mu cos(w/2) c_n
+            spec[5] = (ti, mm, -mu * math.cos(0.5 * w))
+        if w == 0.0:  # one direction: rows 2 and 3 would both state the line; -d_t . e_a >= 0
+            spec[3] = (di, (-ea[0], -ea[1]), None)
+        for k, (vv, vec, ccn) in enumerate(spec):
+            self._coef(r0 + k, vv[0], vec[0])
+            self._coef(r0 + k, vv[1], vec[1])
+            if ccn is not None:
+                self._coef(r0 + k, ci, ccn)
+        ge = (0, 1, 2, 3, 4) if kind == "A" else (0, 1)
+        le = (5,) if kind == "I" else (5, 6, 7)
+        for k in range(8):
+            if k in ge:
+                self._row(r0 + k, 0.0, HINF)
+            elif k in le:
+                self._row(r0 + k, -HINF, 0.0)
+            else:
+                self._row(r0 + k, -HINF, HINF)
+
+    def _set_act(self, k: int, st: str) -> None:
+        p, a = self.prob, self.act[k]
+        v = int(p.v[a])
+        self._col(v, self.lb0[v], 0.0 if st == "L" else self.ub0[v])
+        if p.fc is None:
+            f = int(p.f[a])
+            self._col(f, self.lb0[f], self.lb0[f] if st == "M" else self.ub0[f])
+        else:
+            r = self.excess_row[a]
+            self._row(r, 0.0, 0.0 if st == "M" else float(p.bounds.excess[a]))
+
+    def apply(self, node: Node) -> None:
+        normal, tan, act = node
+        cn, ct, ca = self.cur
+        for i in range(self.m):
+            if normal[i] != cn[i]:
+                self._set_normal(i, normal[i])
+            if tan[i] != ct[i]:
+                self._set_tan(i, tan[i])
+        for k in range(len(self.act)):
+            if act[k] != ca[k]:
+                self._set_act(k, act[k])
+        self.cur = node
+
+    # ---------------------------------------------------------------- solve
+
+    def solve(self, node: Node) -> NodeResult:
+        """The node's LP: a safe bound and its point, or a certified infeasibility."""
+        self.apply(node)
+        h = self.h
+        t0 = time.perf_counter()
+        h.run()
+        self.lp_time += time.perf_counter() - t0
+        self.lp_count += 1
+        self.iterations += int(h.getInfo().simplex_iteration_count)
+        status = h.getModelStatus()
+        if status == OPTIMAL:
+            sol = h.getSolution()
+            x = np.asarray(sol.col_value)
+            bound = self.safe_bound(np.asarray(sol.row_dual))
+            return NodeResult(bound, x)
+        if status in INFEASIBLE and self.infeasible_certified():
+            return NodeResult(None, None)
+        # numerical trouble, or an infeasibility its ray does not prove: once more, cold
+        h.clearSolver()
+        h.run()
+        self.lp_count += 1
+        status = h.getModelStatus()
+        if status == OPTIMAL:
+            sol = h.getSolution()
+            return NodeResult(self.safe_bound(np.asarray(sol.row_dual)),
+                              np.asarray(sol.col_value))  # fmt: skip
+        if status in INFEASIBLE and self.infeasible_certified():
+            return NodeResult(None, None)
+        return NodeResult(None, None, certified=False)
+
+    def safe_bound(self, y: NDArray[np.float64]) -> float:
+        """``max cost.x`` over the node's LP is at most this (module docstring, "Round-off")
+        for HiGHS's row duals ``y`` (its sign convention: ``cost - A^T y`` are the reduced
+        costs), plus the round-off of the sums themselves."""
+        y = np.where(((y > 0) & (self.rhi >= HINF)) | ((y < 0) & (self.rlo <= -HINF)), 0.0, y)
+        z = self.cost - self.A.T @ y
+        cols = z * np.where(z > 0, self.ub, np.where(z < 0, self.lb, 0.0))
+        rows = y * np.where(y > 0, self.rhi, np.where(y < 0, self.rlo, 0.0))
+        if not np.all(np.isfinite(cols)):
+            return math.inf
+        total = float(np.sum(rows) + np.sum(cols))
+        return total + 1e-12 * (1.0 + float(np.sum(np.abs(rows)) + np.sum(np.abs(cols))))
+
+    def infeasible_certified(self) -> bool:
+        """HiGHS's dual ray ``y`` proves the node infeasible: ``y . (A x)`` over the box
+        cannot reach ``y . r`` for any row activity ``r`` in ``[L, U]`` (either sign of
+        ``y``)."""
+        try:
+            _, has, ray = self.h.getDualRay()
+        except Exception:  # noqa: BLE001  (no ray available: unproven)
+            return False
+        if not has:
+            return False
+        ray = np.asarray(ray, dtype=float)
+        for s in (1.0, -1.0):
+            y = s * ray  # a multiplier towards a row's infinite side proves nothing: 0
+            y = np.where(((y > 0) & (self.rlo <= -HINF)) | ((y < 0) & (self.rhi >= HINF)), 0.0, y)
+            z = self.A.T @ y  # y.(A x) = z.x
+            hi_x = float(np.sum(z * np.where(z > 0, self.ub, self.lb)))
+            lo_r = float(np.sum(y * np.where(y > 0, self.rlo, np.where(y < 0, self.rhi, 0.0))))
+            # the round-off of these sums in floating point: well below 1e-12 of the sums of
+            # the magnitudes that enter them
+            box = np.maximum(np.abs(self.lb), np.abs(self.ub))
+            err = 1e-12 * float(np.abs(self.A).T @ np.abs(y) @ box + np.abs(lo_r))
+            if math.isfinite(lo_r) and hi_x < lo_r - err:
+                return True
+        return False
