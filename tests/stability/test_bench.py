@@ -1,5 +1,5 @@
-"""``python -m stability.bench planar|mip|refinement|grasps|tradeoff``: the command line,
-and a tiny run of each benchmark (its CSV and PNG written, the CSV's columns)."""
+"""``python -m stability.bench planar|mip|refinement|grasps|tradeoff|hands|nodelp``: the
+command line, and a tiny run of each benchmark (its CSV and PNG written, the CSV's columns)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from stability.bench import mip, planar, tradeoff
+from stability.bench import mip, nodelp, planar, tradeoff
 from stability.bench.__main__ import BENCHMARKS, main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,9 +63,20 @@ def test_refinement(tmp_path) -> None:
 
 
 def test_grasps(tmp_path) -> None:
+    both = _run("grasps", tmp_path / "two", "--only", "a", "--directions", "1", "--wrenches",
+                "1", "--time-limit", "60")  # fmt: skip
+    tasks = ["check", "max_disturbance", "optimal_commands"]
+    # the default: modesearch and refinement on the same queries, the same answers
+    assert [(r["variant"], r["task"]) for r in both] == [
+        (v, t) for v in ("modesearch", "refinement") for t in tasks
+    ]
+    for a, b in zip(both[:3], both[3:], strict=True):
+        assert a["status"] == b["status"] == "solved"
+        if a["task"] != "check":
+            assert float(a["answer"]) == pytest.approx(float(b["answer"]), rel=1e-4)
     rows = _run("grasps", tmp_path, "--only", "a", "--directions", "1", "--wrenches", "1",
-                "--time-limit", "60")  # fmt: skip
-    assert [r["task"] for r in rows] == ["check", "max_disturbance", "optimal_commands"]
+                "--time-limit", "60", "--methods", "refinement")  # fmt: skip
+    assert [r["task"] for r in rows] == tasks
     assert {r["grasp"] for r in rows} == {"a"} and {r["contacts"] for r in rows} == {"3"}
     assert rows[0]["status"] == "solved" and rows[0]["certified"] in ("True", "False", "")
     # --merge: no run; this run's rows and a copy under another variant name, summarised and
@@ -82,7 +93,7 @@ def test_grasps(tmp_path) -> None:
     summ = _rows(merged / "grasps_summary.csv")
     tasks = ("check", "max_disturbance", "optimal_commands")
     assert [(r["variant"], r["task"]) for r in summ] == [
-        (v, t) for v in ("default", "copy") for t in tasks
+        (v, t) for v in ("refinement", "copy") for t in tasks
     ]
     # the copy's 99 s counts at the 60 s limit only when it is not solved
     assert all(float(r["median_s"]) == 99.0 for r in summ if r["variant"] == "copy")
@@ -90,7 +101,7 @@ def test_grasps(tmp_path) -> None:
     # --queries: one query re-run; merged after the full run, its row replaces the old one
     again = tmp_path / "again"
     main(["grasps", "--queries", "a:check:0", "--directions", "1", "--wrenches", "1",
-          "--time-limit", "60", "--out", str(again)])  # fmt: skip
+          "--time-limit", "60", "--methods", "refinement", "--out", str(again)])  # fmt: skip
     one = _rows(again / "grasps.csv")
     assert [(r["grasp"], r["task"], r["k"]) for r in one] == [("a", "check", "0")]
     both = tmp_path / "both"
@@ -116,3 +127,28 @@ def test_tradeoff(tmp_path, monkeypatch) -> None:
     assert all(float(r["error"]) == 0.0 for r in rows if r["setting"] == "exact")
     back = tradeoff.read_tradeoff(tmp_path / "tradeoff.csv")
     assert [r["setting"] for r in back] == [r["setting"] for r in rows]
+
+
+def test_hands(tmp_path) -> None:
+    """Two random 3-contact hand grasps, modesearch and refinement: one row per query and
+    method, each scored against the best exact value, no bound below another's value."""
+    rows = _run("hands", tmp_path, "--n", "2", "--contacts", "3", "--methods",
+                "modesearch,refinement", "--time-limit", "60")  # fmt: skip
+    assert [(r["id"], r["method"]) for r in rows] == [
+        (f"rand-3-{k}", m) for k in range(2) for m in ("modesearch", "refinement")
+    ]
+    assert all(r["status"] == "solved" and r["bound_violated"] == "False" for r in rows)
+    assert all(float(r["error"]) <= 1e-3 for r in rows)
+    summ = _rows(tmp_path / "hands_summary.csv")
+    assert [r["method"] for r in summ] == ["modesearch", "refinement"]
+
+
+def test_nodelp(tmp_path, monkeypatch) -> None:
+    """Grasp (a)'s first 20 node LPs replayed: HiGHS warm and cold give the search's
+    answers on every LP; DAQP's row is there (its agreement is measured, not promised)."""
+    monkeypatch.setattr(nodelp, "QUERIES", (("a", 0),))
+    main(["nodelp", "--repeats", "20", "--out", str(tmp_path)])
+    rows = _rows(tmp_path / "nodelp.csv")
+    assert [r["solver"] for r in rows] == ["highs warm", "highs cold", "daqp"]
+    assert all(r["agree"] == r["lps"] == "20" for r in rows[:2])
+    assert all(float(r["median_ms"]) > 0 for r in rows)
