@@ -326,15 +326,21 @@ class Search:
         return self.polishes * POLISH_EVERY <= self.popped
 
     def finish(self) -> None:
-        """The incumbent made tidy (least virtual motion) and its slide angles optimised
-        towards the proven bound (:func:`slide_search`); kept when no worse."""
+        """The incumbent made tidy (least virtual motion, :meth:`tidy`); where its bracket is
+        still open, first its slide angles optimised towards the proven bound
+        (:func:`slide_search`, which tidies too), kept when no worse."""
         if self.best is None:
             return
         x, val = self.best
         up = self.upper()
+        closed = up is not None and up - val <= max(self.opts.gap * abs(up), self.abs_tol)
+        if closed:  # no better point is needed: the least motion only
+            tidy = self.tidy(x, val)
+            if tidy is not None:
+                self.best = (tidy, val)
+                return
         self.best = None
-        node = self.lp.root()
-        if not self.polish(x, node, up) or self.best[1] < val - 1e-8 * (1.0 + abs(val)):
+        if not self.polish(x, self.lp.root(), up) or self.best[1] < val - 1e-8 * (1 + abs(val)):
             self.best = (x, val)
             tidy = self.tidy(x, val)
             if tidy is not None:

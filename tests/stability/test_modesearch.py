@@ -269,9 +269,10 @@ def test_optimal_commands_hold_and_a_smaller_one_does_not() -> None:
     assert low.status == "solved" and low.stable is False
 
 
-def test_bad_options_are_named() -> None:
+def test_default_for_spatial_grasps_and_bad_options_are_named() -> None:
     g = examples.pinch()
     q = MaxDisturbance([0, 0, 1, 0, 0, 0], commands=0.1)
+    assert solve(g, q).method == "modesearch"
     with pytest.raises(GraspError, match="levels"):
         solve(g, q, method="modesearch", levels=3)
     with pytest.raises(GraspError, match="gap"):

@@ -369,10 +369,8 @@ def test_agreement_with_iterative_where_it_converges(grasp, direction, commands)
     assert ref.value == pytest.approx(it.value, rel=0.01)
 
 
-def test_default_spatial_method_and_bad_options() -> None:
+def test_bad_options() -> None:
     g = examples.pinch()
-    sol = solve(g, MaxDisturbance(Z, commands=[0.1, 0.1]))
-    assert sol.method == "refinement"
     for bad in ({"initial_edges": 6}, {"levels": -1}, {"normal_uncertainty": float("nan")},
                 {"max_rounds": 0}, {"frobnicate": 1}):  # fmt: skip
         with pytest.raises(GraspError):
