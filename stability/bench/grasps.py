@@ -65,9 +65,17 @@ TARGETS = {3: (0.05, 0.15), 6: (5.0, 30.0)}  # contacts: (check s, max disturban
 SEED = 7
 # the profile of a query: refinement's model building, rounds' MIPs, rounds (MIP plus its
 # least-motion LP) and certification (exact LPs); the rest is Python around them
-PROFILE = ("build_time_s", "mip_time_s", "round_time_s", "certify_time_s",
-           # modesearch's: its node LPs and their count, its polishes (exact points)
-           "lp_time_s", "lps", "polish_time_s", "quick_time_s")
+PROFILE = (
+    "build_time_s",
+    "mip_time_s",
+    "round_time_s",
+    "certify_time_s",
+    # modesearch's: its node LPs and their count, its polishes (exact points)
+    "lp_time_s",
+    "lps",
+    "polish_time_s",
+    "quick_time_s",
+)
 
 
 def balanced_commands(g: Grasp, cone: float = 0.5, least: float = 1.0) -> np.ndarray | None:

@@ -208,6 +208,7 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
                   "quick_time_s": search.quick_time, "lps": lp.lp_count, "lp_time_s": lp.lp_time,
                   "lp_ms": 1e3 * lp.lp_time / max(1, lp.lp_count),
                   "simplex_iterations": lp.iterations, "polishes": search.polishes,
+                  "rejected_points": search.rejected,
                   "polish_time_s": search.polish_time, "unresolved": len(search.unresolved),
                   "first_exact_node": search.first_exact_node,
                   "root_bound": None if search.root_bound is None

@@ -18,6 +18,7 @@ from .._lp import quiet_highs
 from ..model.coulomb import CERTIFY_TRIES, slide_search
 from ..model.problem import length_scale
 from ..model.query import QueryData
+from ..solution import slide_alignment
 from .node import HINF, OPTIMAL, TWO_PI, Node, NodeLP, NodeResult
 
 if TYPE_CHECKING:
@@ -27,6 +28,7 @@ __all__ = ["Search"]
 
 WEDGE = 0.3  # [rad] a sticking contact's friction wedge in a quick mode LP (Search.mode_node)
 POLISH_EVERY = 30  # at most one dive's full polish per this many nodes taken
+EXACT_RTOL = 1e-6  # force conditions of an exact point, relative to 1 + its largest force
 DIVE_EVERY = 10  # polish the node's point every this many nodes (an early incumbent)
 
 
@@ -43,6 +45,7 @@ class Search:
         self.best: tuple[NDArray[np.float64], float] | None = None  # (point, objective)
         self.unresolved: list[float] = []
         self.pruned = -math.inf  # the largest bound of a node pruned by the incumbent
+        self.rejected = 0  # exact points refused by exact_enough
         self.nodes = self.popped = self.polishes = self.polish_found = self.quicks = 0
         self.polish_time = self.quick_time = 0.0
         self.first_exact_node: int | None = None
@@ -57,13 +60,33 @@ class Search:
         v = self.best[1]
         return v + max(self.opts.gap * abs(v), self.abs_tol)
 
-    def offer(self, x: NDArray[np.float64]) -> None:
-        """An exact point (already checked): the incumbent when better."""
+    def offer(self, x: NDArray[np.float64]) -> bool:
+        """An exact point (checked by its maker against the model's rows): the incumbent
+        when better; False when it fails :meth:`exact_enough` (not an exact point)."""
+        if not self.exact_enough(x):
+            self.rejected += 1
+            return False
         val = float(self.lp.cost @ x) if np.any(self.lp.cost) else 0.0
         if self.best is None or val > self.best[1]:
             self.best = (x, val)
             if self.first_exact_node is None:
                 self.first_exact_node = self.nodes
+        return True
+
+    def exact_enough(self, x: NDArray[np.float64]) -> bool:
+        """The force conditions at the point's own scale: the circular cone, friction
+        against each slide at full magnitude (``slide_alignment``) and the spring law within
+        :data:`EXACT_RTOL` of ``1 + max |c|`` (the model's rows are checked at the box's
+        scale, ``1e-7 (1 + B)``, which a grown box makes loose)."""
+        p, g = self.lp.prob, self.ex.grasp
+        pt = p.point(x)
+        c = pt.forces
+        d = g.contact_motion(pt.motion, pt.hand_motion)
+        tol = EXACT_RTOL * (1.0 + float(np.abs(c).max(initial=0.0)))
+        cone = float(np.max(np.linalg.norm(c[:, 1:], axis=1) - g.mu * c[:, 0], initial=0.0))
+        spring = float(np.max(np.abs(c[:, 0] - np.maximum(0.0, self.data.preload - d[:, 0])),
+                              initial=0.0))  # fmt: skip
+        return max(cone, spring, slide_alignment(g.mu, c, d)) <= tol
 
     def polish(self, x: NDArray[np.float64], node: Node, target: float | None) -> bool:
         """Exact points with ``x``'s modes, their slide angles optimised
@@ -77,12 +100,12 @@ class Search:
         for promote, source in CERTIFY_TRIES:
             got = slide_search(self.ex, y, tgt, self.opts.gap, 8, promote=promote,
                                source=source)  # fmt: skip
-            if got is not None:
+            if got is not None and self.offer(got):
                 self.polish_found += 1
-                self.offer(got)
-                break
+                self.polish_time += time.perf_counter() - t0
+                return True
         self.polish_time += time.perf_counter() - t0
-        return got is not None
+        return False
 
     def quick(self, x: NDArray[np.float64], node: Node) -> bool:
         """The exact mode LP of ``x`` on the node LP itself (:meth:`mode_node`): an exact
@@ -95,8 +118,7 @@ class Search:
         if res.x is not None:
             y = self.model_point(res.x, mode)
             if max(self.ex.violations(y, box=False).values()) <= self.exact_tol:
-                self.offer(y)
-                found = True
+                found = self.offer(y)
         self.quick_time += time.perf_counter() - t0
         return found
 
@@ -274,7 +296,7 @@ class Search:
             x = res.x
             vio = self.violations(x, node)
             if not vio:
-                if not self.quick(x, node):
+                if not self.quick(x, node) and self.dive_due():
                     self.polish(x, node, bound)
             elif self.popped % DIVE_EVERY == 0 and not self.quick(x, node) and self.dive_due():
                 self.polish(x, node, bound)
@@ -322,7 +344,8 @@ class Search:
         """A full polish (:func:`slide_search`) of a node's point is due: at most one per
         :data:`POLISH_EVERY` nodes taken (a polish costs about as much as that many node
         LPs; counted, not timed, so that a query's answer does not depend on the
-        machine's load)."""
+        machine's load). (Polishing at the nodes 10, 20, 40, ... only took 2-3x longer on
+        grasps (f) and (i): later incumbents close brackets.)"""
         return self.polishes * POLISH_EVERY <= self.popped
 
     def finish(self) -> None:
@@ -389,7 +412,7 @@ class Search:
         y = self.model_point(np.asarray(h.getSolution().col_value)[:n], mode)
         if max(self.ex.violations(y, box=False).values()) > self.exact_tol:
             return None
-        return y
+        return y if self.exact_enough(y) else None
 
     def violations_tight(self, x: NDArray[np.float64], node: Node) -> list:
         """The violations at a thousandth of the tolerance: where a node's point looks exact
