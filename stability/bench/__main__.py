@@ -43,8 +43,8 @@ def parser() -> argparse.ArgumentParser:
                     help="grasps: refinement's levels q for this run's variants (default 9: "
                     "2048 equivalent edges)")  # fmt: skip
     ap.add_argument("--merge", nargs="+", default=None, metavar="CSV",
-                    help="grasps: no run; summarise and chart the rows of these earlier "
-                    "runs' grasps.csv files together (time-outs at --time-limit)")  # fmt: skip
+                    help="grasps, hands: no run; summarise and chart the rows of these "
+                    "earlier runs' CSV files together (time-outs at --time-limit)")  # fmt: skip
     ap.add_argument("--queries", default=None, metavar="LIST",
                     help="grasps: run only these queries, comma-separated "
                     "grasp:task:index (e.g. 'h:max_disturbance:9'; index from 0 within "

@@ -22,6 +22,7 @@ scale) and every answer's error against its time.
 from __future__ import annotations
 
 import argparse
+import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -158,17 +159,44 @@ def chart(rows: list[dict[str, Any]], summ: list[dict[str, Any]], path: Path) ->
 def cli(args: argparse.Namespace) -> None:
     """``python -m stability.bench hands``: ``--n``, ``--contacts``, ``--methods``,
     ``--exact-contacts``, ``--refinement-contacts``, ``--time-limit`` (default 60 s),
-    ``--seed``, ``--out``."""
+    ``--seed``, ``--out``; ``--merge CSV ...``: no run, earlier runs' rows together."""
     limit = args.time_limit or 60.0
+    out = Path(args.out)
+    if getattr(args, "merge", None):  # earlier runs' rows, re-scored and charted together
+        rows = merge_rows([Path(p) for p in args.merge])
+        return report(score(rows), limit, out)
     contacts = _ints(args.contacts, [3, 4, 5, 6])
     methods = [m for m in (args.methods or "modesearch,refinement,exact").split(",") if m]
     only = {"exact": _ints(args.exact_contacts, [3, 4])}
     if args.refinement_contacts:
         only["refinement"] = _ints(args.refinement_contacts, contacts)
     qs = queries(args.n, contacts, args.seed)
-    rows = run(qs, methods, limit, only)
+    report(run(qs, methods, limit, only), limit, out)
+
+
+def merge_rows(files: list[Path]) -> list[dict[str, Any]]:
+    """The rows of earlier runs' ``hands.csv`` files (``--merge``), typed; a later file's row
+    replaces an earlier one of the same query and method (a method re-run after a change)."""
+
+    def num(v: str) -> float | None:
+        return None if v in ("", "None") else float(v)
+
+    merged: dict[tuple[str, str], dict[str, Any]] = {}
+    for path in files:
+        with open(path, newline="") as fh:
+            for r in csv.DictReader(fh):
+                row = {"id": r["id"], "contacts": int(r["contacts"]), "method": r["method"],
+                       "time_s": float(r["time_s"]), "status": r["status"],
+                       "value": num(r["value"]), "lower": num(r["lower"]),
+                       "upper": num(r["upper"]), "certified": r["certified"] == "True",
+                       "nodes": r["nodes"]}  # fmt: skip
+                merged[(row["id"], row["method"])] = row
+    return list(merged.values())
+
+
+def report(rows: list[dict[str, Any]], limit: float, out: Path) -> None:
+    """Print the summary; write ``hands.csv``, ``hands_summary.csv`` and ``hands.png``."""
     summ = summary(rows, limit)
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"{'method':>11} {'m':>2} | {'median s':>9} {'worst s':>8} | {'t/o':>4} {'closed':>7} | "
           f"{'median err':>10} {'worst err':>10} | bound violations")  # fmt: skip
