@@ -94,7 +94,7 @@ class MipModel:
         self.rows: list[Row] = []
         self.indicators: list[Indicator] = []
         self.sos2: list[Sos2] = []
-        self.objective = np.zeros(0)
+        self._objective = np.zeros(0)
         self.maximize = False
         self.offset = 0.0
         # one of many small MIPs solved in a row (refinement rounds): SCIP then runs without
@@ -112,6 +112,20 @@ class MipModel:
     @property
     def n_vars(self) -> int:
         return len(self.lb)
+
+    @property
+    def objective(self) -> NDArray[np.float64]:
+        """The objective's coefficients, one per variable (0 for variables added after it
+        was set; padded here, not per variable added: a model of n variables is built in
+        O(n), not O(n^2))."""
+        n = len(self.lb)
+        if self._objective.size < n:
+            self._objective = np.concatenate([self._objective, np.zeros(n - self._objective.size)])
+        return self._objective
+
+    @objective.setter
+    def objective(self, value: ArrayLike) -> None:
+        self._objective = np.asarray(value, dtype=float)
 
     def add_var(
         self, lb: float = 0.0, ub: float = INF, kind: str = "C", name: str | None = None
@@ -133,7 +147,6 @@ class MipModel:
         self.ub.append(ub)
         self.kind.append(kind)
         self.var_names.append(name if name is not None else f"x{len(self.lb) - 1}")
-        self.objective = np.append(self.objective, 0.0)
         return len(self.lb) - 1
 
     def add_vars(
@@ -147,9 +160,22 @@ class MipModel:
         """``n`` variables (bounds scalars or length-``n`` arrays), named ``name[i]``."""
         lbs = np.broadcast_to(np.asarray(lb, dtype=float), (n,))
         ubs = np.broadcast_to(np.asarray(ub, dtype=float), (n,))
-        return np.array(
-            [self.add_var(lbs[i], ubs[i], kind, f"{name}[{i}]") for i in range(n)], dtype=np.int64
-        )
+        bad = np.isnan(lbs) | np.isnan(ubs) | (lbs == INF) | (ubs == -INF)
+        if kind not in KINDS or np.any(bad):  # add_var names the problem
+            j = int(np.argmax(bad)) if np.any(bad) else 0
+            self.add_var(lbs[j], ubs[j], kind, f"{name}[{j}]")
+        if kind == "B":
+            lbs, ubs = np.maximum(lbs, 0.0), np.minimum(ubs, 1.0)
+        if np.any(lbs > ubs):
+            j = int(np.argmax(lbs > ubs))
+            raise ModelError(f"{self.name}: empty bounds [{lbs[j]}, {ubs[j]}] for variable "
+                             f"'{name}[{j}]'")  # fmt: skip
+        first = len(self.lb)
+        self.lb.extend(lbs.tolist())
+        self.ub.extend(ubs.tolist())
+        self.kind.extend([kind] * n)
+        self.var_names.extend(f"{name}[{i}]" for i in range(n))
+        return np.arange(first, first + n, dtype=np.int64)
 
     # ---------------------------------------------------------------- constraints
 
@@ -166,7 +192,7 @@ class MipModel:
             )
         if not np.all(np.isfinite(v)):
             raise ModelError(f"{self.name}: {what}: coefficients must be finite, got {v}")
-        if len(np.unique(i)) != len(i):  # merge repeated variables
+        if len(set(i.tolist())) != len(i):  # merge repeated variables
             u, inv = np.unique(i, return_inverse=True)
             v = np.bincount(inv, weights=v, minlength=len(u))
             i = u
