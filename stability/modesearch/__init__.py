@@ -72,7 +72,7 @@ from numpy.typing import NDArray
 from ..api import register
 from ..errors import GraspError
 from ..grasp import Grasp
-from ..model.coulomb import CoulombModel, exact_conditions, stuck_point
+from ..model.coulomb import CoulombModel, exact_conditions
 from ..model.problem import ExactBounds, length_scale, scale_bounds
 from ..model.query import QueryData, add_query, query_value
 from ..model.run import bounds_stats, solution
@@ -196,10 +196,8 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
     existence = data.direction is None and data.command_range is None
     # a first exact point: every contact sticking, every actuator locked (one LP)
     tp = time.perf_counter()
-    stuck = stuck_point(grasp, data, bounds, 0.0, opts.motion_bound)
-    search.polish_time += time.perf_counter() - tp
-    if stuck is not None:
-        search.offer(stuck[1].x)
+    search.stuck()
+    search.quick_time += time.perf_counter() - tp
     outcome = "done"
     if not (existence and search.best is not None):
         outcome = search.run(feasibility=existence)

@@ -233,6 +233,16 @@ class NodeLP:
             r = self.excess_row[a]
             self._row(r, 0.0, 0.0 if st == "M" else float(p.bounds.excess[a]))
 
+    def inscribe(self, on: bool) -> None:
+        """The octagon rows of every cone scaled to the inscribed octagon (``mu cos(pi/8)
+        c_n``: its vertices on the cone) with ``on``, back to the outer one without: a
+        sticking contact's friction in it is in the cone."""
+        scale = math.cos(math.pi / OCTAGON) if on else 1.0
+        for i in range(self.m):
+            ci = int(self.prob.c[i, 0])
+            for k in range(OCTAGON):
+                self._coef(self.cone0 + OCTAGON * i + k, ci, -float(self.mu[i]) * scale)
+
     def apply(self, node: Node) -> None:
         normal, tan, act = node
         cn, ct, ca = self.cur

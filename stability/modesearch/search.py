@@ -122,6 +122,22 @@ class Search:
         self.quick_time += time.perf_counter() - t0
         return found
 
+    def stuck(self) -> None:
+        """A first exact point: every contact closed and sticking (friction in the inscribed
+        octagon), every nonbackdrivable actuator locked; one node LP. The incumbent when it
+        has one (a grasp that holds without slipping needs no tree to say "stable")."""
+        lp = self.lp
+        node = (("C",) * lp.m, (("S", None),) * lp.m, ("L",) * len(lp.act))
+        lp.inscribe(True)
+        try:
+            res = lp.solve(node)
+        finally:
+            lp.inscribe(False)
+        if res.x is not None:
+            y = self.model_point(res.x, node)
+            if max(self.ex.violations(y, box=False).values()) <= self.exact_tol:
+                self.offer(y)
+
     def mode_node(self, x: NDArray[np.float64], node: Node) -> Node:
         """Every state decided from ``x``: open where unloaded, else closed; a contact that
         moves tangentially slides along one fixed direction (an arc of width 0: ``-d_t``'s,
