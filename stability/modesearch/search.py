@@ -81,7 +81,12 @@ class Search:
         p, g = self.lp.prob, self.ex.grasp
         pt = p.point(x)
         c = pt.forces
-        d = g.contact_motion(pt.motion, pt.hand_motion)
+        # the motion as the model states it (round-off entries of G and J zeroed: a joint
+        # moved far by a free transmission would otherwise turn 1e-9 m/rad into slides)
+        d = p.G.T @ pt.motion
+        if p.J is not None:
+            d = d - p.J @ pt.hand_motion
+        d = d.reshape(g.m, 3)
         tol = EXACT_RTOL * (1.0 + float(np.abs(c).max(initial=0.0)))
         cone = float(np.max(np.linalg.norm(c[:, 1:], axis=1) - g.mu * c[:, 0], initial=0.0))
         spring = float(np.max(np.abs(c[:, 0] - np.maximum(0.0, self.data.preload - d[:, 0])),
