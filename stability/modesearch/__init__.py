@@ -230,14 +230,14 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
         if closed:
             stats["reason"] = "every node of the tree is infeasible: no equilibrium"
             return solution("modesearch", grasp, query, False, stats, conditions=conditions)
-        return _open(grasp, query, stats, outcome, search, None)
+        return _open(grasp, query, stats, outcome, search)
     if best is None:
         if closed:  # no exact point anywhere in the box
             stats["reason"] = "every node of the tree is infeasible: no equilibrium"
             if data.direction is not None:
                 stats["capped"] = False
             return solution("modesearch", grasp, query, False, stats, conditions=conditions)
-        return _bracketed(_open(grasp, query, stats, outcome, search, None), upper, lp.sign)
+        return _bracketed(_open(grasp, query, stats, outcome, search), upper, lp.sign)
     value = best[1]
     certified = upper is not None and upper - value <= max(opts.gap * abs(upper), search.abs_tol)
     sol = _answer(grasp, query, stats, ex, best[0], qvar, data, conditions, certified)
@@ -253,8 +253,8 @@ def _message(outcome: str, opts: ModeSearchOptions) -> str:
     return f"node_limit {opts.node_limit} reached; the bracket reached is returned"
 
 
-def _open(grasp: Grasp, query: Any, stats: dict[str, Any], outcome: str, search: Search,
-          _: Any) -> Solution:  # fmt: skip
+def _open(grasp: Grasp, query: Any, stats: dict[str, Any], outcome: str,
+          search: Search) -> Solution:  # fmt: skip
     """No exact point: a time-out, a node limit, or unresolved leaves."""
     if outcome == "done":
         stats["reason"] = (f"{len(search.unresolved)} leaves with arcs narrower than "

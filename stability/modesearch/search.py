@@ -46,10 +46,9 @@ class Search:
         self.unresolved: list[float] = []
         self.pruned = -math.inf  # the largest bound of a node pruned by the incumbent
         self.rejected = 0  # exact points refused by exact_enough
-        self.nodes = self.popped = self.polishes = self.polish_found = self.quicks = 0
+        self.nodes = self.popped = self.polishes = self.quicks = 0
         self.polish_time = self.quick_time = 0.0
         self.first_exact_node: int | None = None
-        self.t0 = time.perf_counter()
 
     # ------------------------------------------------------------ incumbent
 
@@ -106,7 +105,6 @@ class Search:
             got = slide_search(self.ex, y, tgt, self.opts.gap, 8, promote=promote,
                                source=source)  # fmt: skip
             if got is not None and self.offer(got):
-                self.polish_found += 1
                 self.polish_time += time.perf_counter() - t0
                 return True
         self.polish_time += time.perf_counter() - t0
