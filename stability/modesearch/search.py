@@ -29,6 +29,7 @@ __all__ = ["Search"]
 WEDGE = 0.3  # [rad] a sticking contact's friction wedge in a quick mode LP (Search.mode_node)
 POLISH_EVERY = 30  # at most one dive's full polish per this many nodes taken
 EXACT_RTOL = 1e-6  # force conditions of an exact point, relative to 1 + its largest force
+DIVE_TRIES = 1  # slide_search's tries at a dive (CERTIFY_TRIES' first: the node's own slides)
 DIVE_EVERY = 10  # polish the node's point every this many nodes (an early incumbent)
 
 
@@ -92,7 +93,8 @@ class Search:
                               initial=0.0))  # fmt: skip
         return max(cone, spring, slide_alignment(g.mu, c, d)) <= tol
 
-    def polish(self, x: NDArray[np.float64], node: Node, target: float | None) -> bool:
+    def polish(self, x: NDArray[np.float64], node: Node, target: float | None,
+               tries: int = len(CERTIFY_TRIES)) -> bool:  # fmt: skip
         """Exact points with ``x``'s modes, their slide angles optimised
         (:func:`slide_search`, module docstring): the incumbent when better. True if one
         was found."""
@@ -101,7 +103,7 @@ class Search:
         y = self.model_point(x, node)
         tgt = None if target is None else target * self.lp.sign
         got = None
-        for promote, source in CERTIFY_TRIES:
+        for promote, source in CERTIFY_TRIES[:tries]:
             got = slide_search(self.ex, y, tgt, self.opts.gap, 8, promote=promote,
                                source=source)  # fmt: skip
             if got is not None and self.offer(got):
@@ -316,9 +318,9 @@ class Search:
             vio = self.violations(x, node)
             if not vio:
                 if not self.quick(x, node) and self.dive_due():
-                    self.polish(x, node, bound)
+                    self.polish(x, node, bound, DIVE_TRIES)
             elif self.popped % DIVE_EVERY == 0 and not self.quick(x, node) and self.dive_due():
-                self.polish(x, node, bound)
+                self.polish(x, node, bound, DIVE_TRIES)
             if not vio or self.popped % DIVE_EVERY == 0:
                 if feasibility and self.best is not None:
                     heapq.heappush(self.heap, (negb, negd, next(count), node, res))
