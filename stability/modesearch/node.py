@@ -18,6 +18,10 @@ from ..model.query import QueryData
 
 __all__ = ["HINF", "INFEASIBLE", "OPTIMAL", "Node", "NodeLP", "NodeResult", "TWO_PI"]
 
+# HiGHS's dual simplex pricing: Devex (1); its default, steepest edge, costs more per call
+# than it saves on LPs of a few hundred rows that change by a few bounds per node (measured
+# on the grasps benchmark: 13 % less time in all)
+EDGE_WEIGHTS = 1
 OCTAGON = 8  # sides of the outer friction polygon at every node
 HINF = highspy.kHighsInf
 OPTIMAL = highspy.HighsModelStatus.kOptimal
@@ -113,6 +117,7 @@ class NodeLP:
             A[k, idx] = val
             rlo[k], rhi[k] = (-HINF if lo == -math.inf else lo), (HINF if hi == math.inf else hi)
         self.A, self.rlo, self.rhi = A, rlo, rhi
+        self.absA = np.abs(A)  # kept with A: the round-off terms of the bounds
         self.lb, self.ub = np.where(np.isinf(lb), -HINF, lb), np.where(np.isinf(ub), HINF, ub)
         self.lb0, self.ub0 = self.lb.copy(), self.ub.copy()
         self.sign = 1.0 if M.maximize else -1.0  # the search maximises sign * objective
@@ -126,6 +131,7 @@ class NodeLP:
                 self.cost[prob.v[a]] = -B / float(prob.bounds.motion[a])
         h = self.h = quiet_highs()
         for opt, val in (("presolve", "off"), ("solver", "simplex"),
+                         ("simplex_dual_edge_weight_strategy", EDGE_WEIGHTS),
                          ("primal_feasibility_tolerance", 1e-9),
                          ("dual_feasibility_tolerance", 1e-9)):  # fmt: skip
             h.setOptionValue(opt, val)
@@ -165,7 +171,7 @@ class NodeLP:
     def _coef(self, r: int, j: int, v: float) -> None:
         j = int(j)
         if self.A[r, j] != v:
-            self.A[r, j] = v
+            self.A[r, j], self.absA[r, j] = v, abs(v)
             self.h.changeCoeff(r, j, v)
 
     def _set_normal(self, i: int, st: str) -> None:
@@ -266,7 +272,7 @@ class NodeLP:
         h.run()
         self.lp_time += time.perf_counter() - t0
         self.lp_count += 1
-        self.iterations += int(h.getInfo().simplex_iteration_count)
+        self.iterations += int(h.getInfoValue("simplex_iteration_count")[1])
         status = h.getModelStatus()
         if status == OPTIMAL:
             sol = h.getSolution()
@@ -299,8 +305,8 @@ class NodeLP:
         if not np.all(np.isfinite(cols)):
             return math.inf
         total = float(np.sum(rows) + np.sum(cols))
-        mag = float(np.sum(np.abs(rows)) + np.sum(np.abs(cols)) + np.abs(self.A).T @ np.abs(y)
-                    @ np.maximum(np.abs(self.lb), np.abs(self.ub)))  # fmt: skip
+        box = np.maximum(np.abs(self.lb), np.abs(self.ub))
+        mag = float(np.abs(rows).sum() + np.abs(cols).sum() + np.abs(y) @ (self.absA @ box))
         return total + ROUNDOFF * (1.0 + mag)
 
     def infeasible_certified(self) -> bool:
@@ -314,6 +320,8 @@ class NodeLP:
         if not has:
             return False
         ray = np.asarray(ray, dtype=float)
+        box = np.maximum(np.abs(self.lb), np.abs(self.ub))
+        reach = self.absA @ box  # the largest |A_i x| over the box, per row
         for s in (1.0, -1.0):
             y = s * ray  # a multiplier towards a row's infinite side proves nothing: 0
             y = np.where(((y > 0) & (self.rlo <= -HINF)) | ((y < 0) & (self.rhi >= HINF)), 0.0, y)
@@ -322,8 +330,7 @@ class NodeLP:
             lo_r = float(np.sum(y * np.where(y > 0, self.rlo, np.where(y < 0, self.rhi, 0.0))))
             # the round-off of z and of these sums: at most ROUNDOFF of the magnitudes that
             # enter them
-            box = np.maximum(np.abs(self.lb), np.abs(self.ub))
-            err = ROUNDOFF * float(np.abs(self.A).T @ np.abs(y) @ box + np.abs(lo_r))
+            err = ROUNDOFF * float(np.abs(y) @ reach + abs(lo_r))
             if math.isfinite(lo_r) and hi_x < lo_r - err:
                 return True
         return False
