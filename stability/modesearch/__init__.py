@@ -49,7 +49,14 @@ scale): forces and separations ``B``, transmission motions ``V``, excess actuato
 ``E`` (:func:`~stability.model.problem.scale_bounds`) and the motions ``r``, ``q``, ``d_t``
 (``motion_bound * 2 B``, as ``exact``). The bound holds for exact points inside it; an
 exact point beyond the bound, or one at the box, grows it tenfold and the query is solved
-again (:data:`BOX_RETRIES` times).
+again, at most :data:`BOX_RETRIES` times. An answer at the box has no proven bound
+(``upper``/``lower`` None, ``stats["box_reached"]``). The enlargements stop early when the
+larger box moved the exact value by no more than the bracket's tolerance (a grasp whose best
+value is approached only as a slide grows without limit, a mechanism: its value converges
+as the box grows), and a search in a larger box that takes more than
+:data:`RETRY_NODE_FACTOR` times the nodes of the one before it (plus
+:data:`RETRY_NODE_SLACK`), or runs out of time, is dropped for the answer of the smaller box:
+its LPs mix motions of ``1e7`` with forces of 1 and stop resolving them.
 
 Status semantics are ``refinement``'s: ``"solved"`` only with an exact point that passes
 :meth:`Solution.residuals`; ``lower``/``upper`` the bracket, the feasible side an exact
@@ -63,7 +70,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -85,6 +92,8 @@ __all__ = ["MODESEARCH_BOUND_FACTOR", "ModeSearchOptions"]
 
 MODESEARCH_BOUND_FACTOR = 1e3  # the default box, times the query's force scale
 BOX_RETRIES = 2  # tenfold enlargements of the box when an exact point shows it cut
+RETRY_NODE_FACTOR = 5  # a larger box's search may take this many times the nodes before it
+RETRY_NODE_SLACK = 1000  # ... plus these
 
 
 @dataclass
@@ -172,18 +181,14 @@ def _box_reached(ex: CoulombModel, x: NDArray[np.float64]) -> bool:
     return False
 
 
-class _BoxCut(Exception):
-    """The best exact point lies at or beyond the box: the bound may not hold."""
-
-
-def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
-                last: bool) -> Solution:  # fmt: skip
-    """One search in the box of ``opts.bound_factor``; :class:`_BoxCut` when the box may
-    have cut the optimum off, unless ``last``: then the answer keeps its exact point and
-    has no proven bound (``stats["box_reached"]``)."""
+def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float) -> Solution:
+    """One search in the box of ``opts.bound_factor``. Where the box may have cut the
+    optimum off, the answer keeps its exact point and has no proven bound
+    (``stats["box_reached"]`` says why)."""
     data = QueryData.of(grasp, query, 100.0)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
-    stats: dict[str, Any] = {"bound_factor": opts.bound_factor}
+    abs_tol = _abs_tol(data, bounds, grasp, opts)
+    stats: dict[str, Any] = {"bound_factor": opts.bound_factor, "abs_tol": abs_tol}
     bounds_stats(bounds, stats)
     conditions = exact_conditions(0.0)
     tb = time.perf_counter()
@@ -192,7 +197,7 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
     lp = NodeLP(ex, data)
     stats["build_time_s"] = time.perf_counter() - tb
     deadline = None if opts.time_limit is None else t0 + float(opts.time_limit)
-    search = Search(lp, opts, data, qvar, deadline, _abs_tol(data, bounds, grasp, opts))
+    search = Search(lp, opts, data, qvar, deadline, abs_tol)
     existence = data.direction is None and data.command_range is None
     # a first exact point: every contact sticking, every actuator locked (one LP)
     tp = time.perf_counter()
@@ -218,8 +223,6 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float,
         cut = "the best exact point reaches the box"
     if best is not None and upper is not None and best[1] > upper + 1e-7 * (1 + abs(upper)):
         cut = f"exact value {best[1]} beyond the proven bound {upper}"
-    if cut is not None and not last:
-        raise _BoxCut(cut)
     if cut is not None:  # the bound holds only within the box, which the answer reaches
         stats["box_reached"] = cut
         upper = None
@@ -319,17 +322,34 @@ def _solve_modesearch(grasp: Grasp, query: Any, **options: Any) -> Solution:
     t0 = time.perf_counter()
     factor = opts.bound_factor
     cuts: list[str] = []
+    prev: Solution | None = None
     for k in range(BOX_RETRIES + 1):
         left = None if opts.time_limit is None else opts.time_limit - (time.perf_counter() - t0)
         limit = None if left is None else max(0.0, left)
-        o = ModeSearchOptions(**{**opts.__dict__, "bound_factor": factor, "time_limit": limit})
-        try:
-            sol = _solve_once(grasp, query, o, time.perf_counter(), k == BOX_RETRIES)
-        except _BoxCut as e:
-            cuts.append(f"bound_factor {factor:g}: {e}")
-            factor *= 10.0
-            continue
-        if cuts:
-            sol.stats["box_enlarged"] = cuts
-        return sol
-    raise AssertionError("unreachable: the last box returns its answer")
+        nodes = opts.node_limit
+        if prev is not None:
+            nodes = min(nodes, RETRY_NODE_FACTOR * int(prev.stats["nodes"]) + RETRY_NODE_SLACK)
+        o = replace(opts, bound_factor=factor, time_limit=limit, node_limit=nodes)
+        sol = _solve_once(grasp, query, o, time.perf_counter())
+        if prev is not None and sol.status in ("timeout", "not_converged"):
+            cuts.append(f"bound_factor {factor:g}: {sol.status} ({sol.stats['nodes']} nodes); "
+                        f"the answer of bound_factor {factor / 10:g} is kept")  # fmt: skip
+            sol = prev
+            break
+        cut = sol.stats.get("box_reached")
+        if cut is None or k == BOX_RETRIES or (prev is not None and _converged(prev, sol, opts)):
+            break
+        cuts.append(f"bound_factor {factor:g}: {cut}")
+        prev, factor = sol, factor * 10.0
+    if cuts:
+        sol.stats["box_enlarged"] = cuts
+    return sol
+
+
+def _converged(prev: Solution, sol: Solution, opts: ModeSearchOptions) -> bool:
+    """The larger box moved the exact value by at most the bracket's tolerance."""
+    a, b = prev.stats.get("exact_value"), sol.stats.get("exact_value")
+    if a is None or b is None:
+        return False
+    tol = max(opts.gap * abs(b), float(sol.stats.get("abs_tol", 0.0)))
+    return abs(b - a) <= tol

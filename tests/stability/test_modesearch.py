@@ -256,6 +256,42 @@ def test_timeout_returns_the_bracket_reached(bench) -> None:
     assert sol.stats["nodes"] > 1 and not sol.stats["certified"]
 
 
+def test_an_answer_at_the_box_has_no_bound_and_stops_growing_it(bench, monkeypatch) -> None:
+    """Grasp (a), max disturbance 2: its best exact point slides without limit (a mechanism:
+    the value grows towards a limit with the box). In the first box the point reaches the
+    box; one tenfold box moves the value by less than the bracket's tolerance, so the
+    enlargement stops there, and the answer, at the box, carries no proven bound."""
+    import stability.modesearch as ms
+
+    g, q = _bench_query(bench, "a", "max_disturbance", 2)
+    with monkeypatch.context() as mp:
+        mp.setattr(ms, "BOX_RETRIES", 0)
+        small = solve(g, q, method="modesearch")
+    assert small.stats.get("box_reached") and small.upper is None
+    sol = solve(g, q, method="modesearch")
+    _exact(sol)
+    assert sol.stats["box_reached"] and sol.upper is None and not sol.stats["certified"]
+    assert len(sol.stats["box_enlarged"]) == 1  # 1e3 -> 1e4, converged
+    tol = max(1e-4 * abs(sol.value), sol.stats["abs_tol"])
+    assert abs(sol.value - small.stats["exact_value"]) <= tol  # each closed to the gap
+
+
+def test_a_larger_box_that_stalls_keeps_the_smaller_answer(bench, monkeypatch) -> None:
+    """A search in an enlarged box limited to few nodes (as one whose LPs stop resolving
+    forces against huge motions) is dropped for the smaller box's complete answer."""
+    import stability.modesearch as ms
+
+    g, q = _bench_query(bench, "a", "max_disturbance", 2)
+    with monkeypatch.context() as mp:
+        mp.setattr(ms, "BOX_RETRIES", 0)
+        first = solve(g, q, method="modesearch")
+    monkeypatch.setattr(ms, "RETRY_NODE_FACTOR", 0)
+    monkeypatch.setattr(ms, "RETRY_NODE_SLACK", 2)
+    sol = solve(g, q, method="modesearch")
+    assert sol.value == first.value and sol.stats["bound_factor"] == 1e3
+    assert "is kept" in sol.stats["box_enlarged"][-1]
+
+
 def test_optimal_commands_hold_and_a_smaller_one_does_not() -> None:
     """The pinch holding 1 N along z: the cheapest equal commands hold (an exact point), and
     95 % of them do not (Existence: the tree exhausted)."""
