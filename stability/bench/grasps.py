@@ -49,6 +49,7 @@ from ..io import write_csv
 from ..mip import INF, MipModel
 from ..mip import solve as mip_solve
 from ..queries import Existence, MaxDisturbance, OptimalCommands
+from .hands import BOUND_RTOL, reach
 from .plots import pyplot, save
 
 CONTACTS = [3, 3, 3, 3, 4, 4, 4, 4, 4, 5, 6, 6]
@@ -174,7 +175,9 @@ def bench_grasps(
                          "rounds": len(sol.stats.get("rounds", [])),
                          "certified": sol.stats.get("certified"),
                          **{k: round(float(sol.stats.get(k, 0.0)), 4) for k in PROFILE},
-                         "nodes": sol.stats.get("nodes")})  # fmt: skip
+                         "nodes": sol.stats.get("nodes"),
+                         "force_bound": sol.stats.get("force_bound"),
+                         "reach": reach(sol)})  # fmt: skip
             bar.update(1)
     bar.close()
     return rows
@@ -295,6 +298,8 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
                 "time_s": float(r["time_s"]),
                 "lower": num(r.get("lower", "")),
                 "upper": num(r.get("upper", "")),
+                "force_bound": num(r.get("force_bound", "")),
+                "reach": num(r.get("reach", "")),
             }
             rows.append({**r, **typed})
     return rows
@@ -308,6 +313,47 @@ def merge_rows(files: list[Path]) -> list[dict[str, Any]]:
         for r in read_rows(path):
             merged[(r["variant"], r["grasp"], r["task"], r["k"])] = r
     return list(merged.values())
+
+
+def conflicts(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every exact value of one variant beyond another variant's proven bound on the same
+    query (max disturbance: its ``lower`` above the other's ``upper``; optimal commands:
+    its ``upper`` below the other's ``lower``, both by more than ``BOUND_RTOL`` relative).
+    ``inside``: the point's ``reach`` is within the other's box (``force_bound``; unknown
+    counts as inside): a wrong bound. Beyond the box, the bound does not speak for it
+    (:mod:`stability.bench.hands`)."""
+    by_q: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+    for r in rows:
+        if r["task"] != "check":
+            by_q.setdefault((r["grasp"], r["task"], int(r["k"])), []).append(r)
+    out = []
+    for (label, task, k), rs in by_q.items():
+        for a in rs:
+            for b in rs:
+                md = task == "max_disturbance"
+                val, bound = (a["lower"], b["upper"]) if md else (a["upper"], b["lower"])
+                if a is b or val is None or bound is None:
+                    continue
+                beyond = val - bound if md else bound - val
+                if beyond <= BOUND_RTOL * abs(bound) + 1e-12:
+                    continue
+                far, B = a.get("reach"), b.get("force_bound")
+                out.append({"grasp": label, "task": task, "k": k, "variant": a["variant"],
+                            "value": val, "other": b["variant"], "bound": bound,
+                            "reach": far, "other_force_bound": B,
+                            "inside": far is None or B is None or far <= B})  # fmt: skip
+    return out
+
+
+def print_conflicts(rows: list[dict[str, Any]]) -> None:
+    found = conflicts(rows)
+    inside = sum(c["inside"] for c in found)
+    print(f"exact values beyond another variant's bound: {inside} inside its box (wrong "
+          f"bounds), {len(found) - inside} beyond it")  # fmt: skip
+    for c in found:
+        print(f"  {c['grasp']}:{c['task']}:{c['k']} {c['variant']} {c['value']:.8g} vs "
+              f"{c['other']} {c['bound']:.8g} (reach {c['reach']}, "
+              f"its box {c['other_force_bound']})")  # fmt: skip
 
 
 def parse_queries(text: str | None) -> set[tuple[str, str, int]] | None:
@@ -401,6 +447,7 @@ def cli(args: argparse.Namespace) -> None:
         rows = merge_rows([Path(p) for p in args.merge])
         summ = by_contacts(rows, limit)
         print_by_contacts(summ)
+        print_conflicts(rows)
         Path(args.out).mkdir(parents=True, exist_ok=True)
         csv_path = write_csv(Path(args.out) / "grasps.csv", rows)
         write_csv(Path(args.out) / "grasps_summary.csv", summ)
@@ -434,6 +481,7 @@ def cli(args: argparse.Namespace) -> None:
         print_grasps(summary(mine))
     summ = by_contacts(rows, limit)
     print_by_contacts(summ)
+    print_conflicts(rows)
     if mine:
         write_grasps(mine, Path(args.out))
     Path(args.out).mkdir(parents=True, exist_ok=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from stability.bench import mip, nodelp, planar, tradeoff
+from stability.bench import grasps, mip, nodelp, planar, tradeoff
 from stability.bench.__main__ import BENCHMARKS, main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -141,6 +141,28 @@ def test_hands(tmp_path) -> None:
     assert all(float(r["error"]) <= 1e-3 for r in rows)
     summ = _rows(tmp_path / "hands_summary.csv")
     assert [r["method"] for r in summ] == ["modesearch", "refinement"]
+
+
+def test_conflicts_tell_a_wrong_bound_from_a_point_beyond_the_box() -> None:
+    """An exact value above another variant's bound is a wrong bound when the point lies in
+    that variant's box, and is counted apart when it lies beyond it (max disturbance: the
+    lower side is exact; optimal commands: the upper)."""
+
+    def row(variant, task, lower, upper, reach, B):
+        return {"variant": variant, "grasp": "a", "task": task, "k": 0, "lower": lower,
+                "upper": upper, "reach": reach, "force_bound": B}  # fmt: skip
+
+    md = [row("x", "max_disturbance", 2.0, 2.0, 50.0, 1e3),
+          row("y", "max_disturbance", 1.5, 1.9, 5.0, 10.0)]  # fmt: skip
+    (c,) = grasps.conflicts(md)
+    assert (c["variant"], c["other"], c["inside"]) == ("x", "y", False)
+    md[0]["reach"] = 9.0
+    assert grasps.conflicts(md)[0]["inside"]
+    oc = [row("x", "optimal_commands", 0.5, 0.5, 1.0, 1e3),
+          row("y", "optimal_commands", 0.6, 0.7, 1.0, 1e3)]  # fmt: skip
+    assert [(c["variant"], c["inside"]) for c in grasps.conflicts(oc)] == [("x", True)]
+    md[0]["lower"] = 1.9 * (1 + 1e-9)  # within the rounding allowance: no conflict
+    assert grasps.conflicts(md) == []
 
 
 def test_nodelp(tmp_path, monkeypatch) -> None:
