@@ -30,6 +30,7 @@ WEDGE = 0.3  # [rad] a sticking contact's friction wedge in a quick mode LP (Sea
 POLISH_EVERY = 30  # at most one dive's full polish per this many nodes taken
 EXACT_RTOL = 1e-6  # force conditions of an exact point, relative to 1 + its largest force
 DIVE_TRIES = 1  # slide_search's tries at a dive (CERTIFY_TRIES' first: the node's own slides)
+DIVE_STEPS = 1  # slide_search's steps at a dive
 DIVE_EVERY = 10  # polish the node's point every this many nodes (an early incumbent)
 
 
@@ -94,7 +95,7 @@ class Search:
         return max(cone, spring, slide_alignment(g.mu, c, d)) <= tol
 
     def polish(self, x: NDArray[np.float64], node: Node, target: float | None,
-               tries: int = len(CERTIFY_TRIES)) -> bool:  # fmt: skip
+               tries: int = len(CERTIFY_TRIES), steps: int = 8) -> bool:  # fmt: skip
         """Exact points with ``x``'s modes, their slide angles optimised
         (:func:`slide_search`, module docstring): the incumbent when better. True if one
         was found."""
@@ -104,7 +105,7 @@ class Search:
         tgt = None if target is None else target * self.lp.sign
         got = None
         for promote, source in CERTIFY_TRIES[:tries]:
-            got = slide_search(self.ex, y, tgt, self.opts.gap, 8, promote=promote,
+            got = slide_search(self.ex, y, tgt, self.opts.gap, steps, promote=promote,
                                source=source)  # fmt: skip
             if got is not None and self.offer(got):
                 self.polish_time += time.perf_counter() - t0
@@ -318,9 +319,9 @@ class Search:
             vio = self.violations(x, node)
             if not vio:
                 if not self.quick(x, node) and self.dive_due():
-                    self.polish(x, node, bound, DIVE_TRIES)
+                    self.polish(x, node, bound, DIVE_TRIES, DIVE_STEPS)
             elif self.popped % DIVE_EVERY == 0 and not self.quick(x, node) and self.dive_due():
-                self.polish(x, node, bound, DIVE_TRIES)
+                self.polish(x, node, bound, DIVE_TRIES, DIVE_STEPS)
             if not vio or self.popped % DIVE_EVERY == 0:
                 if feasibility and self.best is not None:
                     heapq.heappush(self.heap, (negb, negd, next(count), node, res))
