@@ -31,6 +31,7 @@ POLISH_EVERY = 30  # at most one dive's full polish per this many nodes taken
 EXACT_RTOL = 1e-6  # force conditions of an exact point, relative to 1 + its largest force
 DIVE_TRIES = 1  # slide_search's tries at a dive (CERTIFY_TRIES' first: the node's own slides)
 DIVE_STEPS = 1  # slide_search's steps at a dive
+POLISH_STEPS = 8  # slide_search's steps elsewhere (leaves that finish or narrow the search)
 DIVE_EVERY = 10  # polish the node's point every this many nodes (an early incumbent)
 
 
@@ -95,7 +96,7 @@ class Search:
         return max(cone, spring, slide_alignment(g.mu, c, d)) <= tol
 
     def polish(self, x: NDArray[np.float64], node: Node, target: float | None,
-               tries: int = len(CERTIFY_TRIES), steps: int = 8) -> bool:  # fmt: skip
+               tries: int = len(CERTIFY_TRIES), steps: int = POLISH_STEPS) -> bool:  # fmt: skip
         """Exact points with ``x``'s modes, their slide angles optimised
         (:func:`slide_search`, module docstring): the incumbent when better. True if one
         was found."""
@@ -317,12 +318,10 @@ class Search:
                 break
             x = res.x
             vio = self.violations(x, node)
-            if not vio:
-                if not self.quick(x, node) and self.dive_due():
-                    self.polish(x, node, bound, DIVE_TRIES, DIVE_STEPS)
-            elif self.popped % DIVE_EVERY == 0 and not self.quick(x, node) and self.dive_due():
+            dive = not vio or self.popped % DIVE_EVERY == 0
+            if dive and not self.quick(x, node) and self.dive_due():
                 self.polish(x, node, bound, DIVE_TRIES, DIVE_STEPS)
-            if not vio or self.popped % DIVE_EVERY == 0:
+            if dive:
                 if feasibility and self.best is not None:
                     heapq.heappush(self.heap, (negb, negd, next(count), node, res))
                     return "done"
