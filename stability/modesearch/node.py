@@ -148,6 +148,21 @@ class NodeLP:
         lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, nr
         h.passModel(lp)
         self.n = n
+        # per contact: the (row, column) of each arc-row coefficient (:meth:`_set_arc`'s
+        # order), the values last set and the rows' bound pattern
+        self.dt_cols = [[int(j) for j in ex.dt[i]] for i in range(self.m)]
+        self.arc_pos: list[tuple[list[int], list[int]]] = []
+        for i in range(self.m):
+            r0, ci = self.arc0 + 8 * i, int(prob.c[i, 0])
+            t0, t1 = (int(j) for j in prob.c[i, 1:])
+            d0, d1 = self.dt_cols[i]
+            pos = [(r0, t0), (r0, t1), (r0 + 1, t0), (r0 + 1, t1), (r0 + 2, d0), (r0 + 2, d1),
+                   (r0 + 3, d0), (r0 + 3, d1)]  # fmt: skip
+            for k in range(4, 8):
+                pos += [(r0 + k, t0), (r0 + k, t1), (r0 + k, ci)]
+            self.arc_pos.append(([r for r, _ in pos], [c for _, c in pos]))
+        self.arc_vals: list[tuple[float, ...] | None] = [None] * self.m
+        self.arc_pattern: list[str | None] = [None] * self.m
         a_count = len(self.act)
         self.cur: Node = (("U",) * self.m, (("U", None),) * self.m, ("U",) * a_count)
         self.lp_count, self.lp_time, self.iterations = 0, 0.0, 0
@@ -181,45 +196,21 @@ class NodeLP:
         self._col(u, 0.0, 0.0 if st == "C" else self.ub0[u])
 
     def _set_tan(self, i: int, st: tuple[str, tuple[float, float] | None]) -> None:
-        ex = self.ex
         kind, arc = st
-        for j in ex.dt[i]:
-            j = int(j)
+        for j in self.dt_cols[i]:
             if kind in ("S", "I"):
                 self._col(j, 0.0, 0.0)
             else:
                 self._col(j, self.lb0[j], self.ub0[j])
         r0 = self.arc0 + 8 * i
-        if arc is None:
-            for k in range(8):
-                self._row(r0 + k, -HINF, HINF)
+        pattern = None if arc is None else kind
+        if arc is not None:
+            self._set_arc(i, kind, arc)
+        if pattern == self.arc_pattern[i]:
             return
-        a, w = arc
-        b = a + w
-        mid = a + 0.5 * w
-        na, nb = (-math.sin(a), math.cos(a)), (math.sin(b), -math.cos(b))
-        mm = (math.cos(mid), math.sin(mid))
-        ea, eb = (math.cos(a), math.sin(a)), (math.cos(b), math.sin(b))
-        mu = float(self.mu[i])
-        p = self.prob
-        ci, ti = int(p.c[i, 0]), p.c[i, 1:]
-        di = ex.dt[i]
-        # rows: n_a.c_t >= 0, n_b.c_t >= 0, n_a.(-d_t) >= 0, n_b.(-d_t) >= 0,
-        # m.c_t - mu cos(w/2) c_n >= 0 (the chord), m.c_t, e_a.c_t, e_b.c_t <= mu c_n
-        spec = [(ti, na, None), (ti, nb, None), (di, (-na[0], -na[1]), None),
-                (di, (-nb[0], -nb[1]), None), (ti, mm, -mu * math.cos(0.5 * w)),
-                (ti, mm, -mu), (ti, ea, -mu), (ti, eb, -mu)]  # fmt: skip
-        if kind == "I":  # inscribed: c_t within the chord, m.c_t <= mu cos(w/2) c_n
-            spec[5] = (ti, mm, -mu * math.cos(0.5 * w))
-        if w == 0.0:  # one direction: rows 2 and 3 would both state the line; -d_t . e_a >= 0
-            spec[3] = (di, (-ea[0], -ea[1]), None)
-        for k, (vv, vec, ccn) in enumerate(spec):
-            self._coef(r0 + k, vv[0], vec[0])
-            self._coef(r0 + k, vv[1], vec[1])
-            if ccn is not None:
-                self._coef(r0 + k, ci, ccn)
-        ge = (0, 1, 2, 3, 4) if kind == "A" else (0, 1)
-        le = (5,) if kind == "I" else (5, 6, 7)
+        self.arc_pattern[i] = pattern
+        ge = () if arc is None else (0, 1, 2, 3, 4) if kind == "A" else (0, 1)
+        le = () if arc is None else (5,) if kind == "I" else (5, 6, 7)
         for k in range(8):
             if k in ge:
                 self._row(r0 + k, 0.0, HINF)
@@ -227,6 +218,37 @@ class NodeLP:
                 self._row(r0 + k, -HINF, 0.0)
             else:
                 self._row(r0 + k, -HINF, HINF)
+
+    def _set_arc(self, i: int, kind: str, arc: tuple[float, float]) -> None:
+        """The coefficients of contact ``i``'s eight arc rows for the arc ``(a, w)``: with
+        ``n_a = (-sin a, cos a)``, ``n_b = (sin b, -cos b)`` (``b = a + w``), ``m`` the mid
+        direction and ``e_a``, ``e_b`` the ends, the rows ``n_a.c_t >= 0``,
+        ``n_b.c_t >= 0``, ``n_a.(-d_t) >= 0``, ``n_b.(-d_t) >= 0``,
+        ``m.c_t - mu cos(w/2) c_n >= 0`` (the chord), ``m.c_t``, ``e_a.c_t``,
+        ``e_b.c_t <= mu c_n`` (the tangents). Inscribed (``"I"``): ``m.c_t <= mu cos(w/2)
+        c_n``. Width 0: row 3 is ``-d_t.e_a >= 0`` (rows 2 and 3 would both state the
+        line)."""
+        a, w = arc
+        b = a + w
+        mid = a + 0.5 * w
+        sa, ca, sb, cb = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
+        sm, cm = math.sin(mid), math.cos(mid)
+        mu = float(self.mu[i])
+        chord = -mu * math.cos(0.5 * w)
+        row3 = (-ca, -sa) if w == 0.0 else (-sb, cb)
+        vals = (-sa, ca, sb, -cb, sa, -ca, row3[0], row3[1], cm, sm, chord,
+                cm, sm, chord if kind == "I" else -mu, ca, sa, -mu, cb, sb, -mu)  # fmt: skip
+        old = self.arc_vals[i]
+        if vals == old:
+            return
+        rows, cols = self.arc_pos[i]
+        ch = self.h.changeCoeff
+        for k, v in enumerate(vals):
+            if old is None or old[k] != v:
+                ch(rows[k], cols[k], v)
+        self.arc_vals[i] = vals
+        self.A[rows, cols] = vals
+        self.absA[rows, cols] = np.abs(vals)
 
     def _set_act(self, k: int, st: str) -> None:
         p, a = self.prob, self.act[k]
@@ -298,13 +320,15 @@ class NodeLP:
         """``max cost.x`` over the node's LP is at most this (package docstring, "Round-off")
         for HiGHS's row duals ``y`` (its sign convention: ``cost - A^T y`` are the reduced
         costs), plus the round-off of the sums themselves."""
-        y = np.where(((y > 0) & (self.rhi >= HINF)) | ((y < 0) & (self.rlo <= -HINF)), 0.0, y)
+        y = y.copy()
+        y[(y > 0) & (self.rhi >= HINF)] = 0.0
+        y[(y < 0) & (self.rlo <= -HINF)] = 0.0
         z = self.cost - self.A.T @ y
         cols = z * np.where(z > 0, self.ub, np.where(z < 0, self.lb, 0.0))
         rows = y * np.where(y > 0, self.rhi, np.where(y < 0, self.rlo, 0.0))
-        if not np.all(np.isfinite(cols)):
+        total = float(rows.sum() + cols.sum())
+        if not math.isfinite(total):
             return math.inf
-        total = float(np.sum(rows) + np.sum(cols))
         box = np.maximum(np.abs(self.lb), np.abs(self.ub))
         mag = float(np.abs(rows).sum() + np.abs(cols).sum() + np.abs(y) @ (self.absA @ box))
         return total + ROUNDOFF * (1.0 + mag)

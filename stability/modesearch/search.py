@@ -219,21 +219,22 @@ class Search:
         normal, _, act = node
         out = []
         dscale = 1e-9 * (1.0 + float(np.abs(x[ex.dt]).max(initial=0.0)))
+        cs, us, ds = x[p.c].tolist(), x[p.u].tolist(), x[ex.dt].tolist()
+        mus = self.lp.mu.tolist()
         for i in range(self.lp.m):
-            cn, u = float(x[p.c[i, 0]]), float(x[p.u[i]])
+            (cn, c1, c2), u, (d1, d2) = cs[i], us[i], ds[i]
             if normal[i] == "U" and cn > tol and u > tol:
                 out.append((min(cn, u), "n", i))
             if cn <= tol:
                 continue
-            ct, dt = x[p.c[i, 1:]], x[ex.dt[i]]
-            nd = float(np.linalg.norm(dt))
-            lim = float(self.lp.mu[i]) * cn
+            nd = math.hypot(d1, d2)
+            lim = mus[i] * cn
             if nd > dscale:
-                miss = float(np.linalg.norm(ct + lim * dt / nd))
+                miss = math.hypot(c1 + lim * d1 / nd, c2 + lim * d2 / nd)
                 if miss > tol:
                     out.append((miss, "t", i))
                     continue
-            excess = float(np.linalg.norm(ct)) - lim
+            excess = math.hypot(c1, c2) - lim
             if excess > tol:
                 out.append((excess, "t", i))
         for k, a in enumerate(self.lp.act):
