@@ -182,17 +182,20 @@ class MipModel:
     def _terms(
         self, idx: ArrayLike, val: ArrayLike, what: str
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        i = np.atleast_1d(np.asarray(idx)).astype(np.int64)
-        v = np.broadcast_to(np.asarray(val, dtype=float), i.shape).copy()
+        i = np.asarray(idx)
+        i = (i.reshape(1) if i.ndim == 0 else i).astype(np.int64)
         if i.ndim != 1:
             raise ModelError(f"{self.name}: {what}: indices must be one-dimensional")
-        if i.size and (i.min() < 0 or i.max() >= self.n_vars):
+        v = np.asarray(val, dtype=float)
+        v = np.full(i.shape, float(v)) if v.ndim == 0 else np.broadcast_to(v, i.shape).copy()
+        il = i.tolist()
+        if il and (min(il) < 0 or max(il) >= self.n_vars):
             raise ModelError(
                 f"{self.name}: {what}: variable index out of range 0..{self.n_vars - 1}"
             )
-        if not np.all(np.isfinite(v)):
+        if not np.isfinite(v).all():
             raise ModelError(f"{self.name}: {what}: coefficients must be finite, got {v}")
-        if len(set(i.tolist())) != len(i):  # merge repeated variables
+        if len(set(il)) != len(il):  # merge repeated variables
             u, inv = np.unique(i, return_inverse=True)
             v = np.bincount(inv, weights=v, minlength=len(u))
             i = u
