@@ -3,7 +3,7 @@
 Examples::
 
     python -m ihm list
-    python -m ihm show barrett_box                      # table + barrett_box.png
+    python -m ihm show barrett_box                      # table + runs/ihm/barrett_box.png
     python -m ihm show barrett_box --out box.png --rrd box.rrd
     python -m ihm show barrett_box --preload 0.3 0.3 0.3 0
     python -m ihm map barrett_box --plane xy --workers 2 --nonbackdrivable
@@ -39,6 +39,7 @@ from . import scenes  # noqa: E402
 from .contacts import SceneGrasp, grasp_from_mujoco  # noqa: E402
 
 PROG = "python -m ihm"
+OUT_DIR = Path("runs") / "ihm"  # where show and map write by default (git ignores runs/)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -68,7 +69,7 @@ def _parser() -> argparse.ArgumentParser:
         "--out",
         type=Path,
         metavar="PATH.png",
-        help="PNG to write (default: SCENE.png in the current directory)",
+        help=f"PNG to write (default: {OUT_DIR}/SCENE.png)",
     )
     show.add_argument(
         "--rrd", type=Path, metavar="PATH.rrd", help="also write a rerun recording to this file"
@@ -154,7 +155,7 @@ def _parser() -> argparse.ArgumentParser:
     mp_.add_argument("--ray", metavar="ADDRESS", help="run the directions as Ray tasks: 'auto' "
                      "(the running cluster, else a new local one), 'local' or a cluster address "
                      "(needs pip install -e '.[ray]')")  # fmt: skip
-    mp_.add_argument("--out", type=Path, default=Path("."), help="output folder (default .)")
+    mp_.add_argument("--out", type=Path, default=OUT_DIR, help=f"output folder (default {OUT_DIR})")
     mp_.add_argument("--no-progress", action="store_true", help="no progress bar")
     bt = sub.add_parser(
         "batch",
@@ -237,7 +238,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         f"equilibrium residuals: object max|G c + w_g| = {res['object']:.3g} [N, N m], "
         f"hand max|J^T c - R f| = {res['hand']:.3g} [N m]"
     )
-    out = args.out if args.out is not None else Path(f"{args.scene}.png")
+    out = args.out if args.out is not None else OUT_DIR / f"{args.scene}.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
     png = render_png(
         model,
         data,

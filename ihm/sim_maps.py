@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 from stability import GraspError
 from stability.api import DEFAULT_SPATIAL_METHOD, RENAMED_METHODS
 from stability.io import write_csv
-from stability.maps import ResistibleMap, plane_axes, plot_resistible
+from stability.maps import ResistibleMap, plane_axes, plot_resistible, radial_top
 
 from . import scenes
 from .resistance import simulated_resistance
@@ -418,6 +418,7 @@ def plot_maps(path: Path, maps: Sequence[tuple[str, ResistibleMap]], title: str)
     for k, (label, rm) in enumerate(maps):
         plot_resistible(ax, rm, "", color=f"C{k}")
         ax.plot([], [], color=f"C{k}", label=label)
+    ax.set_ylim(0, max(radial_top(rm) for _, rm in maps))  # every overlaid map fits
     ax.legend(loc="lower center", fontsize=8, bbox_to_anchor=(0.5, -0.22))
     ax.set_title(title, fontsize=9, pad=18)
     fig.tight_layout()
@@ -470,6 +471,7 @@ def run(
             maps.append((f"{method}, {what}{tag}", rm))
             keys.append((method, what))
     stem = f"{scene}_{plane}" + ("_object" if frame == "object" else "")
+    Path(out).mkdir(parents=True, exist_ok=True)
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
     title = f"{scene}: resistible force in the {frame} {plane} plane [N] (cap {cap:g} N)"
     png = plot_maps(out / f"{stem}.png", maps, title)

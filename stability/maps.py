@@ -28,7 +28,15 @@ from .grasp import Grasp
 from .planar import max_disturbance_map
 from .queries import MaxDisturbance
 
-__all__ = ["ResistibleMap", "plane_axes", "resistible_forces", "plot_resistible", "thesis_figure"]
+__all__ = [
+    "ResistibleMap",
+    "label_plane",
+    "plane_axes",
+    "plot_resistible",
+    "radial_top",
+    "resistible_forces",
+    "thesis_figure",
+]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -111,8 +119,27 @@ def resistible_forces(
     return ResistibleMap(angles, mags, capped, float(cap), plane, method)
 
 
+def radial_top(rmap: ResistibleMap) -> float:
+    """The polar chart's outer radius [N] for ``rmap``: just beyond the cap where a direction
+    reached it, else just beyond the largest finite answer (the cap where there is none)."""
+    finite = rmap.magnitudes[np.isfinite(rmap.magnitudes)]
+    if rmap.capped.any() or not finite.size or finite.max() <= 0:
+        return rmap.cap * 1.05
+    return float(min(finite.max() * 1.1, rmap.cap * 1.05))
+
+
+def label_plane(ax: Any, plane: str) -> None:
+    """Name the plane's axes at 0 and 90 degrees of a polar chart (angles from the plane's
+    first axis towards its second, :class:`ResistibleMap`)."""
+    ax.set_xticks(np.radians([0, 90, 180, 270]))
+    a, b = plane[0], plane[1]
+    ax.set_xticklabels([f"+{a}", f"+{b}", f"-{a}", f"-{b}"])
+
+
 def plot_resistible(ax: Any, rmap: ResistibleMap, title: str = "", color: str = "C0") -> None:
-    """Draw a map on a matplotlib polar axis; capped directions are hatched (">= cap")."""
+    """Draw a map on a matplotlib polar axis; capped directions are hatched (">= cap"); the
+    radius reaches just beyond the map (:func:`radial_top`), the axes are named
+    (:func:`label_plane`)."""
     th = np.r_[rmap.angles, rmap.angles[:1]]
     r = np.r_[rmap.magnitudes, rmap.magnitudes[:1]]
     ax.fill(th, np.nan_to_num(r), color=color, alpha=0.35, lw=0)  # (a gap where unanswered)
@@ -121,7 +148,8 @@ def plot_resistible(ax: Any, rmap: ResistibleMap, title: str = "", color: str = 
         cap_r = np.where(np.r_[rmap.capped, rmap.capped[:1]], rmap.cap, np.nan)
         ax.plot(th, cap_r, color="k", lw=3, label=f">= cap ({rmap.cap:g} N)")
         ax.legend(loc="lower left", fontsize=7, bbox_to_anchor=(-0.15, -0.15))
-    ax.set_ylim(0, rmap.cap * 1.05)
+    ax.set_ylim(0, radial_top(rmap))
+    label_plane(ax, rmap.plane)
     ax.set_title(title, fontsize=9)
 
 

@@ -44,8 +44,8 @@ def steps_label(x: float) -> str:
 
 def plot_curve(run_dir: Path, target_speed: float, out: Path | None = None) -> Path:
     """curve.png: training episode return (64-step episodes, smoothed) and the evaluated
-    rotation speed and drop rate over env steps; the dotted line is the speed target
-    ``target_speed`` [rad/s] (``train.rotation.TARGET_SPEED``)."""
+    rotation speed [rad/s, left axis] and drop rate [%, right axis] over env steps; the
+    dotted line is the speed target ``target_speed`` [rad/s] (``train.rotation.TARGET_SPEED``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -69,13 +69,20 @@ def plot_curve(run_dir: Path, target_speed: float, out: Path | None = None) -> P
             rows = list(csv.DictReader(f))
         if rows:
             x = [int(r["steps"]) for r in rows]
-            ax[1].plot(x, [float(r["speed_rad_s"]) for r in rows], "o-", label="speed [rad/s]")
-            ax[1].plot(x, [float(r["drop_rate"]) for r in rows], "s--", label="drop rate")
+            ax[1].plot(x, [float(r["speed_rad_s"]) for r in rows], "o-", label="speed")
             label = f"target speed (>= {target_speed:g} rad/s)"
             ax[1].axhline(target_speed, color="gray", lw=0.8, ls=":", label=label)
-            ax[1].legend(loc="upper left")
+            drops = ax[1].twinx()  # a fraction has its own axis: not read against rad/s
+            drops.plot(x, [100.0 * float(r["drop_rate"]) for r in rows], "s--", color="C3",
+                       label="drop rate")  # fmt: skip
+            drops.set_ylim(0.0, 100.0)
+            drops.set_ylabel("drop rate [% of episodes]", color="C3")
+            lines = ax[1].get_legend_handles_labels()
+            more = drops.get_legend_handles_labels()
+            ax[1].legend(lines[0] + more[0], lines[1] + more[1], loc="upper left")
     ax[1].set_xlabel("env steps")
-    ax[1].set_title("evaluation: deterministic policy, 20 s episodes")
+    ax[1].set_ylabel("rotation speed [rad/s]")
+    ax[1].set_title("validation: deterministic policy, training start grasps")
     for a in ax:
         a.grid(alpha=0.3)
         a.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 2.5, 5, 10]))

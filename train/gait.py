@@ -20,6 +20,7 @@ import numpy as np
 
 from stability.cli import ArgumentParser
 from train.policy import SHIPPED, evaluate, load_policy
+from train.runfiles import PolicyError
 
 __all__ = ["gait_period", "main", "render_strip", "rollout"]
 
@@ -131,7 +132,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, float]:
     p.add_argument("--eval-out", default=None, help="JSON file for the --episodes evaluation")
     a = p.parse_args(argv)
     os.environ.setdefault("MUJOCO_GL", "egl")
-    act, env_kwargs = load_policy(Path(a.run_dir))
+    try:
+        act, env_kwargs = load_policy(Path(a.run_dir))
+    except PolicyError as e:
+        p.error(str(e))
     if a.episodes:
         import json
 

@@ -61,6 +61,7 @@ from stability.io import write_csv
 from train.evaluation import RotationEpisode, run_episodes
 from train.policy import SHIPPED, load_policy
 from train.rotation import MAX_DROP_RATE, TARGET_SPEED
+from train.runfiles import PolicyError, check_policy_dir
 from train.stats import wilson_interval
 
 __all__ = [
@@ -320,6 +321,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     if a.still and not a.out:
         p.error("--still needs --out (it would overwrite the policy's own evaluation files)")
     policy = Path(a.policy)
+    try:
+        check_policy_dir(policy)
+    except PolicyError as e:
+        p.error(str(e))
     out = Path(a.out) if a.out else policy
     out.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("MUJOCO_GL", "egl")

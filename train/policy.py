@@ -22,7 +22,7 @@ import numpy as np
 from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
 from train.evaluation import RotationEpisode, one_by_one, run_episodes
 from train.rotation import env_physics, policy_dir
-from train.runfiles import load_actor_critic
+from train.runfiles import check_policy_dir, load_actor_critic
 
 __all__ = ["ROOT", "SHIPPED", "STATED_RANGES", "evaluate", "load_policy", "policy_dir"]
 
@@ -49,8 +49,9 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
     ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``; a training run
     that kept a best validated checkpoint is read from its ``best/``
     (:func:`train.rotation.policy_dir`), the policy its evaluations and export name.
+    :class:`~train.runfiles.PolicyError` names what a directory lacks.
     """
-    run_dir = policy_dir(Path(run_dir))
+    run_dir = check_policy_dir(Path(run_dir))
     policy = load_actor_critic(run_dir)
     with (run_dir / "vecnormalize.pkl").open("rb") as f:
         norm = pickle.load(f)

@@ -55,6 +55,7 @@ from ihm.rerun_log import SceneRecorder
 from shields.qp import BACKENDS
 from train.policy import SHIPPED, load_policy
 from train.rotation import RotateConfig, make_env
+from train.runfiles import PolicyError, check_policy_dir
 from train.sb3 import build_parser, opt
 
 __all__ = ["SHIELDS", "RolloutConfig", "blueprint", "main", "parse_config", "run_episode"]
@@ -95,13 +96,10 @@ class RolloutConfig:
 
 
 def _policy_problems(path: Path) -> list[str]:
-    if not path.is_dir():
-        return [f"--policy {path}: no such directory"]
-    missing = [f for f in ("vecnormalize.pkl", "config.json") if not (path / f).is_file()]
-    if not ((path / "policy.pt").is_file() or (path / "model.zip").is_file()):
-        missing.insert(0, "policy.pt or model.zip")
-    if missing:
-        return [f"--policy {path}: not a policy directory (missing {', '.join(missing)})"]
+    try:
+        check_policy_dir(path)
+    except PolicyError as e:
+        return [f"--policy {e}"]
     return []
 
 

@@ -629,10 +629,11 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         env.close()
     print(
         f"{run_dir}: {result['num_timesteps']} steps in {train_s:.0f} s "
-        f"({result['steps_per_second']:.0f} env steps/s); deterministic policy over "
-        f"{result.get('episodes', 0)} x {cfg.eval_seconds:g} s: "
-        f"{result.get('speed_rad_s', float('nan')):.3f} rad/s, "
-        f"drop rate {result.get('drop_rate', float('nan')):.3f}"
+        f"({result['steps_per_second']:.0f} env steps/s); validation on training start "
+        f"grasps, deterministic policy over {result.get('episodes', 0)} x "
+        f"{cfg.eval_seconds:g} s: {result.get('speed_rad_s', float('nan')):.3f} rad/s, "
+        f"drop rate {result.get('drop_rate', float('nan')):.3f} (held-out grasps: "
+        f"python -m train.heldout {run_dir})"
     )
     return {**result, "run_dir": str(run_dir)}
 

@@ -27,6 +27,8 @@ from train.sb3 import PrivilegedCriticPolicy
 
 __all__ = [
     "FINETUNE",
+    "PolicyError",
+    "check_policy_dir",
     "checkpoint",
     "export_policy",
     "given",
@@ -71,11 +73,33 @@ def init_weights(model: PPO, source: Path) -> None:
         ) from e
 
 
+class PolicyError(ValueError):
+    """A directory that is not a run or policy directory (what it lacks is named)."""
+
+
+def check_policy_dir(run_dir: Path) -> Path:
+    """:func:`policy_dir` of ``run_dir`` once it holds a policy (``policy.pt`` or
+    ``model.zip``), ``vecnormalize.pkl`` and ``config.json``; else :class:`PolicyError`
+    naming what is missing. Reads nothing else and creates nothing."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise PolicyError(f"{run_dir}: no such directory")
+    src = policy_dir(run_dir)
+    missing = [f for f in ("vecnormalize.pkl", "config.json") if not (src / f).is_file()]
+    if not ((src / "policy.pt").is_file() or (src / "model.zip").is_file()):
+        missing.insert(0, "policy.pt or model.zip")
+    if missing:
+        raise PolicyError(f"{run_dir}: not a policy directory (missing {', '.join(missing)})")
+    return src
+
+
 def load_actor_critic(run_dir: Path) -> ActorCriticPolicy:
     """The policy of a run or policy directory (:func:`policy_dir`: its ``best/`` when it kept
     one), on the CPU: ``policy.pt`` (``ActorCriticPolicy.save``, a shipped policy) when there
-    is one, else the policy of ``model.zip``."""
+    is one, else the policy of ``model.zip``; :class:`PolicyError` when it holds neither."""
     src = policy_dir(Path(run_dir))
+    if not (src / "policy.pt").is_file() and not (src / "model.zip").is_file():
+        raise PolicyError(f"{run_dir}: not a policy directory (missing policy.pt or model.zip)")
     if (src / "policy.pt").is_file():
         saved = torch.load(src / "policy.pt", map_location="cpu", weights_only=False)
         cls = PrivilegedCriticPolicy if "actor_obs" in saved["data"] else ActorCriticPolicy

@@ -14,7 +14,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import random
+import time
 import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import field
@@ -263,28 +265,54 @@ def normalizer(train_env: VecEnv) -> Callable[[np.ndarray], np.ndarray] | None:
 class TqdmProgress(BaseCallback):
     """A plain tqdm progress bar over env steps (SB3's own bar needs ``rich``).
 
-    The bar counts env steps, but its rate and time left are the averages over the whole
-    elapsed time (``smoothing=0``), so the PPO updates and the evaluations between rollouts
-    count: the time left is that of the rest of the run, not of the rest of the env steps
-    alone (with tqdm's default smoothing the rate was that of the last rollout's steps, and
-    the time left a fraction of the real one)."""
+    The bar counts env steps; its rate and time left are those of the last ``window``
+    seconds of whole rollout cycles (rollout, PPO update and any evaluation between two
+    rollout starts), so that updates and evaluations count and a change of the machine's
+    load shows within minutes. Until a second rollout starts, the rate is the average
+    since the start. ``rate`` after training: the run's steps over its wall time."""
 
-    def __init__(self, total: int, desc: str = "") -> None:
+    def __init__(self, total: int, desc: str = "", window: float = 600.0) -> None:
         super().__init__()
-        self.total, self.desc = total, desc
+        self.total, self.desc, self.window = total, desc, window
         self.rate = float("nan")
+        self.samples: list[tuple[float, int]] = []  # (time [s], steps) at rollout starts
+        self.recent = float("nan")  # [steps/s]
 
     def _on_training_start(self) -> None:
         self.bar = tqdm(
-            total=self.total, desc=self.desc, unit="step", dynamic_ncols=True, smoothing=0
-        )
+            total=self.total, desc=self.desc, unit="step", dynamic_ncols=True, smoothing=0,
+            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]",
+        )  # fmt: skip
 
     def _on_step(self) -> bool:
         self.bar.update(self.training_env.num_envs)
+        self._show(refresh=False)
         return True
 
     def _on_rollout_start(self) -> None:
-        self.bar.refresh()  # after an update or evaluation: the time left counts it
+        now = time.perf_counter()
+        self.samples.append((now, self.bar.n))
+        # the oldest sample kept is the last one at least `window` seconds old
+        old = [k for k, (t, _) in enumerate(self.samples) if t <= now - self.window]
+        if old:
+            del self.samples[: old[-1]]
+        (t0, n0), (t1, n1) = self.samples[0], self.samples[-1]
+        if t1 > t0 and n1 > n0:
+            self.recent = (n1 - n0) / (t1 - t0)
+        self._show(refresh=True)  # after an update or evaluation: the time left counts it
+
+    def _show(self, refresh: bool) -> None:
+        """The recent rate and the time left at it (steps left / rate); tqdm's own average
+        since the start until a second rollout has started."""
+        rate = self.recent
+        if not (math.isfinite(rate) and rate > 0):
+            d = self.bar.format_dict
+            rate = d["n"] / d["elapsed"] if d["elapsed"] > 0 and d["n"] > 0 else float("nan")
+        if math.isfinite(rate) and rate > 0:
+            left = tqdm.format_interval((self.bar.total - self.bar.n) / rate)
+            self.bar.set_postfix_str(f"{rate:.1f}step/s, {left} left", refresh=False)
+        if refresh:
+            self.bar.refresh()
 
     def _on_training_end(self) -> None:
         d = self.bar.format_dict

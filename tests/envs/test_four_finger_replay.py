@@ -117,6 +117,7 @@ def test_cube_turn_is_the_yaw_modulo_a_quarter_turn(deg: float) -> None:
     assert cube_turn(q) == pytest.approx(want, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_turned_starts_read_back_from_mujoco_at_the_stated_rate() -> None:
     """``turned_prob=1``: every start's cube, its x axis read from ``data.xmat``, is turned
     at least 22.5 degrees from the hand's square; ``0.5``: about half the starts plus half

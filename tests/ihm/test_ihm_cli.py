@@ -195,6 +195,13 @@ def test_main_show_in_process(toy_dir: Path, tmp_path: Path, monkeypatch, capsys
     assert "equilibrium residuals" in text.out
     assert "left" in text.out and "right" in text.out  # hand links in the table
     assert matplotlib.image.imread(out).shape[:2] == (150, 200)
+    work = tmp_path / "work"  # without --out: runs/ihm/, not the current directory
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main(["show", "toy", "--width", "200", "--height", "150"]) == 0
+    assert "wrote runs/ihm/toy.png" in capsys.readouterr().out
+    assert [p.name for p in work.iterdir()] == ["runs"]
+    assert (work / "runs" / "ihm" / "toy.png").is_file()
     rc = main(["show", "toy", "--preload", "1", "2", "3"])
     assert rc == 2
     err = capsys.readouterr().err

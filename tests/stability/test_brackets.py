@@ -101,12 +101,14 @@ def test_timeout_keeps_the_bracket_reached() -> None:
 
 
 def test_solved_always_has_a_value(bench_a) -> None:
+    """Grasp (a)'s first three directions hold a load below the cap by every method: each
+    answer is solved and stable with a value in ``(0, cap]``."""
     g, f, dirs = bench_a
     for d in dirs:
         for method in ("refinement", "iterative", "no_mdp"):
             sol = solve(g, MaxDisturbance(d, commands=f, cap=100.0), method=method)
-            if sol.status == "solved" and sol.stable:
-                assert sol.value is not None, (method, sol.stats)
+            assert sol.status == "solved" and sol.stable, (method, sol.status, sol.stats)
+            assert sol.value is not None and 0.0 < sol.value <= 100.0, (method, sol.stats)
 
 
 def test_exact_brackets_its_answer() -> None:

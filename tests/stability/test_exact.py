@@ -213,6 +213,7 @@ def test_presolve_infeasibility_is_rechecked() -> None:
         assert sol.status == "solved" and sol.value == pytest.approx(0.141744, rel=1e-4)
 
 
+@pytest.mark.slow
 def test_an_optimum_pruned_too_low_is_refuted_in_a_fitted_box() -> None:
     """Seed 84 without presolve: SCIP's optimum in the query's box (cap 100) is 0.250946,
     with its dual bound equal to it, where the exact optimum is 0.362424 (refinement and
@@ -258,6 +259,7 @@ def test_a_disagreement_withdraws_the_upper_bound() -> None:
 # ------------------------------------------------------- the box (stability/exact.py)
 
 
+@pytest.mark.slow
 def test_an_answer_at_the_box_is_solved_again_in_a_larger_one() -> None:
     """The tendon finger along +z with a box of 1 (bound_factor) times the force scale: the
     answer's slide reaches the box, so the query is solved again in a box of 10, where
@@ -302,6 +304,7 @@ def test_the_box_loop_keeps_its_answer_and_withdraws_the_bound(monkeypatch) -> N
     assert "timeout" in sol.stats["box_enlarged"][0]
 
 
+@pytest.mark.slow
 def test_a_recheck_stopped_by_the_time_limit_leaves_the_answer_uncertified(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

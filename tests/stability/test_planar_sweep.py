@@ -281,3 +281,26 @@ def test_bad_input():
         pl.max_disturbance_map(spatial, np.eye(6)[:2])
     empty = pl.max_disturbance_map(THREE, np.zeros((0, 3)))
     assert [len(x) for x in empty] == [0, 0, 0]
+
+
+def test_map_chart_radius_fits_the_answers_and_names_the_axes() -> None:
+    """A map well below its cap is drawn out to just beyond its largest answer, one that
+    reaches the cap out to the cap; 0 and 90 degrees are labelled with the plane's axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from stability.maps import ResistibleMap, plot_resistible, radial_top
+
+    angles = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+    small = ResistibleMap(angles, np.r_[1.2, 1.9, np.nan, 1.5, 0, 0, 1, 1], np.zeros(8, bool),
+                          10.0, "xz", "planar")  # fmt: skip
+    assert radial_top(small) == pytest.approx(1.9 * 1.1)
+    capped = ResistibleMap(angles, np.full(8, 10.0), np.ones(8, bool), 10.0, "xy", "planar")
+    assert radial_top(capped) == pytest.approx(10.5)
+    fig, ax = plt.subplots(subplot_kw={"projection": "polar"})
+    plot_resistible(ax, small)
+    assert ax.get_ylim()[1] == pytest.approx(2.09)
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["+x", "+z", "-x", "-z"]
+    plt.close(fig)

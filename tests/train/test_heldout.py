@@ -93,6 +93,7 @@ def test_factors_change_one_thing_at_a_time() -> None:
         assert len(changed) == 1, s
 
 
+@pytest.mark.slow
 def test_still_hand_counts_the_start_grasps_own_drops(tmp_path) -> None:
     """``--still``: zero actions instead of the policy; the object does not turn, the nominal
     grip's first test grasps drop at the worst corners (grasp 0 within 0.1 s), the firm grip's
@@ -126,3 +127,22 @@ def test_still_hand_counts_the_start_grasps_own_drops(tmp_path) -> None:
         main([str(SHIPPED), "--range-scale", "2"])
     with pytest.raises(SystemExit):
         main([str(SHIPPED), "--still"])
+
+
+def test_a_directory_without_a_policy_is_refused_and_nothing_is_created(tmp_path, capsys) -> None:
+    """``python -m train.heldout DIR`` where DIR does not exist or holds no policy: exit 2
+    with one line naming what is missing; no directory or file is left behind."""
+    from train.heldout import main
+
+    nope = tmp_path / "nope"
+    with pytest.raises(SystemExit) as e:
+        main([str(nope)])
+    assert e.value.code == 2 and f"{nope}: no such directory" in capsys.readouterr().err
+    assert not nope.exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(SystemExit) as e:
+        main([str(empty)])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "missing policy.pt or model.zip" in err
+    assert list(empty.iterdir()) == []

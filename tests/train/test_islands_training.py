@@ -98,6 +98,7 @@ def test_ppo_resume_continues_the_run(run_dir: Path) -> None:
     assert stats_count(run_dir) == pytest.approx(2 + 256 + 2 + 128)
 
 
+@pytest.mark.slow
 def test_islands_quick_writes_csv_png_and_table(tmp_path: Path) -> None:
     out = tmp_path / "bench"
     # 200 steps: not a rollout boundary (2 envs x 64 steps), so the budget stop is exercised

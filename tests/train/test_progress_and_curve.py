@@ -93,3 +93,36 @@ def test_curve_step_labels_are_short(tmp_path: Path) -> None:
                                        "1600,0.4,0.1,2,1.0\n3200,0.6,0.0,2,2.0\n")  # fmt: skip
     out = plot_curve(tmp_path, 0.5)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+class SlowerLater(BaseCallback):
+    """A run that slows down (``fast`` seconds per vector step, then ``slow`` from step
+    ``after``), as under a load that starts halfway."""
+
+    def __init__(self, fast: float, slow: float, after: int) -> None:
+        super().__init__()
+        self.fast, self.slow, self.after = fast, slow, after
+
+    def _on_step(self) -> bool:
+        time.sleep(self.fast if self.num_timesteps <= self.after else self.slow)
+        return True
+
+
+def test_progress_bar_rate_follows_a_change_of_load() -> None:
+    """A run that slows 30-fold after two of its five rollouts: at the last rollout start the bar's
+    rate is the last cycle's (its window is shorter than a cycle), not the average since the
+    start."""
+    cfg = islands_ppo.Config(n_envs=2, n_steps=32, batch_size=64, n_epochs=1, total_steps=320)
+    seeds = RunSeeds(1)
+    seed_everything(seeds.global_seed)
+    env = islands_ppo.build_envs(cfg, seeds)
+    model = islands_ppo.build_model(cfg, env)
+    bar = TqdmProgress(320, desc="tiny", window=0.05)
+    probe = TimeLeftProbe(bar)
+    t0 = time.perf_counter()
+    model.learn(cfg.total_steps, callback=[SlowerLater(0.001, 0.03, 128), bar, probe])
+    env.close()
+    (t_a, n_a, _), (t_b, n_b, rate) = probe.seen[-2], probe.seen[-1]
+    last_cycle = (n_b - n_a) / (t_b - t_a)
+    assert rate == pytest.approx(last_cycle, rel=0.1)
+    assert rate < 0.7 * n_b / (t_b - t0)  # the average since the start is well above it

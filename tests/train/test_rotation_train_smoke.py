@@ -43,7 +43,8 @@ def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     res = json.loads((run_dir / "eval.json").read_text())
     assert res["num_timesteps"] == 256 and res["episodes"] == 2
     assert 0.0 <= res["drop_rate"] <= 1.0 and np.isfinite(res["speed_rad_s"])
-    assert "rad/s" in p.stdout
+    assert "rad/s" in p.stdout and "validation on training start grasps" in p.stdout
+    assert f"python -m train.heldout {run_dir}" in p.stdout
     q = _train_ppo("--resume", str(run_dir), "--total-steps", "128", "--no-progress")
     assert q.returncode == 0, q.stderr[-2000:]
     assert json.loads((run_dir / "eval.json").read_text())["num_timesteps"] == 384
@@ -100,6 +101,7 @@ def test_gait_period_of_a_periodic_signal() -> None:
     assert gait_period(ctrl) == 23
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("obj", ["sphere", "cylinder", "cube"])
 def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> None:
     """A few thousand steps per object, with the default's randomised physics: the documented
@@ -124,6 +126,7 @@ def test_train_ppo_smoke_per_object_with_randomised_physics(tmp_path, obj) -> No
     assert np.isfinite(res["speed_rad_s"]) and np.isfinite(res["summed_rad_s"])
 
 
+@pytest.mark.slow
 def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> None:
     """``--resume RUN --randomize --corner-prob P --hard-prob Q --validate-corners N --grip
     firm``: config.json records the fine-tune (the training envs draw the hard region with

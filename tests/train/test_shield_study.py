@@ -17,6 +17,7 @@ TINY = ["--n-envs", "2", "--n-steps", "256", "--batch-size", "256",
         "--workers", "0", "--no-progress"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_study_runs_end_to_end(tmp_path: Path) -> None:
     out, runs = tmp_path / "out", tmp_path / "runs"
     args = ["--shields", "none,lookahead", "--seeds", "1", "--total-steps", "1024",

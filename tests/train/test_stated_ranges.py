@@ -52,6 +52,7 @@ def test_nominal_policy_meets_the_target_on_held_out_grasps(path) -> None:
     assert r["drop_rate"] <= MAX_DROP_RATE and r["speed_rad_s"] >= TARGET_SPEED
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ROBUST)
 def test_robust_policy_turns_at_its_slowest_stated_corner(name: str) -> None:
     """Run here, at the stated corner where the file records the lowest speed, the first two

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import csv
 import os
+import runpy
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -25,6 +27,26 @@ def run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
         [sys.executable, "-m", *args],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout,
     )  # fmt: skip
+
+
+def run_here(capsys: pytest.CaptureFixture[str], *args: str) -> subprocess.CompletedProcess:
+    """``python -m *args`` in this process (as ``runpy`` runs it for ``-m``): the exit
+    status and what it printed, without a new interpreter's imports per command."""
+    module, *argv = args
+    saved = sys.argv
+    sys.argv = [module, *argv]
+    code: int | str | None = 0
+    try:
+        with warnings.catch_warnings():  # the module is imported already: runpy says so
+            warnings.simplefilter("ignore", RuntimeWarning)
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
+    except SystemExit as e:
+        code = e.code
+    finally:
+        sys.argv = saved
+    out = capsys.readouterr()
+    rc = code if isinstance(code, int) else (0 if code is None else 1)
+    return subprocess.CompletedProcess(list(args), rc, out.out, out.err)
 
 
 HELP = [
@@ -47,13 +69,14 @@ HELP = [
 
 
 @pytest.mark.parametrize(("command", "option"), HELP, ids=[c for c, _ in HELP])
-def test_help(command: str, option: str) -> None:
-    p = run(*command.split(), "--help")
+def test_help(command: str, option: str, capsys: pytest.CaptureFixture[str]) -> None:
+    p = run_here(capsys, *command.split(), "--help")
     assert p.returncode == 0, p.stderr
     assert p.stdout.startswith(f"usage: python -m {command}") and option in p.stdout
 
 
 def test_rotation_help_is_the_default_and_islands_the_subcommand() -> None:
+    """In new interpreters, as a user types them (the other commands run in-process)."""
     rotation, islands = run("train.ppo", "--help"), run("train.ppo", "islands", "--help")
     assert "--object" in rotation.stdout and "--object" not in islands.stdout
     assert "--env-id" in islands.stdout and "--env-id" not in rotation.stdout
@@ -73,9 +96,11 @@ def test_rotation_help_is_the_default_and_islands_the_subcommand() -> None:
         ("envs.bench --steps", "argument --steps: expected one argument"),
     ],
 )
-def test_errors_are_one_line_and_exit_2(command: str, message: str) -> None:
+def test_errors_are_one_line_and_exit_2(
+    command: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A bad option prints ``prog: error: message`` and a ``--help`` hint, not the usage."""
-    p = run(*command.split())
+    p = run_here(capsys, *command.split())
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 2 and message in lines[0], p.stderr
@@ -96,14 +121,14 @@ def test_shields_bench_prints_the_new_command_without_importing_train() -> None:
     assert q.stdout.strip() == "False", q.stderr
 
 
-def test_envs_bench_names_the_moved_parts() -> None:
+def test_envs_bench_names_the_moved_parts(capsys: pytest.CaptureFixture[str]) -> None:
     for option, command in (
         ("--train", "python -m train.bench training"),
         ("--fidelity", "python -m train.bench fidelity"),
         ("--transfer", "python -m train.bench transfer"),
         ("--no-env", "python -m train.bench training|fidelity|transfer"),  # nothing left to run
     ):
-        p = run("envs.bench", option)
+        p = run_here(capsys, "envs.bench", option)
         assert p.returncode == 2 and command in p.stderr, p.stderr
 
 
@@ -112,14 +137,34 @@ def read_csv(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def test_fidelity_and_transfer_tiny_runs(tmp_path: Path) -> None:
-    p = run("train.bench", "fidelity", "--episodes", "1", "--every", "32", "--out", str(tmp_path))
+def test_fidelity_and_transfer_tiny_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    p = run_here(
+        capsys,
+        "train.bench",
+        "fidelity",
+        "--episodes",
+        "1",
+        "--every",
+        "32",
+        "--out",
+        str(tmp_path),
+    )
     assert p.returncode == 0, p.stderr
     rows = read_csv(tmp_path / "four_finger_fidelity.csv")
     assert len(rows) == 7 and rows[3]["setting"] == "2 ms x 25, PGS 1e-4 (shipped)"
     assert all(int(r["states"]) == 2 for r in rows)  # steps 0 and 32 of a 64-step episode
-    p = run(
-        "train.bench", "transfer", "--episodes", "1", "--seconds", "0.5", "--out", str(tmp_path)
+    p = run_here(
+        capsys,
+        "train.bench",
+        "transfer",
+        "--episodes",
+        "1",
+        "--seconds",
+        "0.5",
+        "--out",
+        str(tmp_path),
     )
     assert p.returncode == 0, p.stderr
     rows = read_csv(tmp_path / "four_finger_transfer.csv")
