@@ -21,7 +21,6 @@ with. Directions whose solve fails (time-out) are NaN in the map.
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -320,7 +319,7 @@ def scene_map_rows(
 
 def _with_init(token: str, init: Any, initargs: tuple, fn: Any, job: Any) -> Any:
     """``fn(job)`` after ``init(*initargs)``, which runs once per worker process and map
-    (``token``): the set-up of a pool's initializer, for Ray's reused workers."""
+    (``token``): a worker's set-up before its first direction (the executors reuse workers)."""
     if _STATE.get("_token") != token:
         init(*initargs)
         _STATE["_token"] = token
@@ -329,43 +328,39 @@ def _with_init(token: str, init: Any, initargs: tuple, fn: Any, job: Any) -> Any
 
 def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, progress: bool,
               desc: str, ray: str | None = None) -> list:  # fmt: skip
-    """``fn`` over ``jobs`` in this process (``workers`` 1), a local pool, or as Ray tasks on
-    the cluster at ``ray`` (:class:`stability.batch.RayExecutor`; ``workers`` then sizes a new
-    local cluster), in order, with a bar."""
+    """``fn`` over ``jobs`` in this process (``workers`` 1), in ``workers`` local processes
+    (:class:`stability.batch.LocalExecutor`: a worker that dies is replaced and its direction
+    retried), or as Ray tasks on the cluster at ``ray`` (:class:`stability.batch.RayExecutor`;
+    ``workers`` then sizes a new local cluster), in order, with a bar. ``init(*initargs)``
+    runs once per worker process."""
     closer: Any = None
-    if ray is not None:
+    if ray is None and workers == 1:
+        init(*initargs)
+        it: Any = enumerate(map(fn, jobs))
+    else:
         import functools
         import uuid
 
-        from stability.batch import RayExecutor
+        from stability.batch import make_executor
 
-        closer = RayExecutor(ray, num_cpus=workers if workers > 1 else None)
+        closer = make_executor(workers if ray is None or workers > 1 else None, ray)
         task = functools.partial(_with_init, uuid.uuid4().hex, init, initargs, fn)
-        it: Any = _ray_values(closer.run(task, enumerate(jobs)))
-        desc += " (ray)"
-    elif workers == 1:
-        init(*initargs)
-        it = enumerate(map(fn, jobs))
-    else:
-        start = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        closer = mp.get_context(start).Pool(workers, initializer=init, initargs=initargs)
-        it = enumerate(closer.imap(fn, jobs))
+        it = _values(closer.run(task, enumerate(jobs)))
+        desc += " (ray)" if ray is not None else ""
     if progress:
         from tqdm import tqdm
 
         it = tqdm(it, total=len(jobs), desc=desc, unit="dir")
     try:
-        out = dict(it)  # job index -> result (Ray's arrive in completion order)
+        out = dict(it)  # job index -> result (they arrive in completion order)
         return [out[k] for k in range(len(jobs))]
     finally:
         if closer is not None:
             closer.close()
-            if ray is None:
-                closer.join()
 
 
-def _ray_values(outcomes: Any) -> Any:
-    """``(k, value)`` per Ray outcome; :class:`MapError` for a direction that failed."""
+def _values(outcomes: Any) -> Any:
+    """``(k, value)`` per executor outcome; :class:`MapError` for a direction that failed."""
     for k, outcome in outcomes:
         if outcome.status != "ok":
             raise MapError(f"direction {k}: {outcome.status}: {outcome.message}")

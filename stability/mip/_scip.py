@@ -4,14 +4,19 @@ logarithmic encoding of :func:`stability.mip.model.add_log_sos2` (:data:`LOG_SOS
 from __future__ import annotations
 
 import math
+import os
+import sys
+import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 from .model import MipModel, add_log_sos2
 
-__all__ = ["build_scip", "optimize_scip", "solve_scip"]
+__all__ = ["build_scip", "c_stderr", "optimize_scip", "solve_scip"]
 
 _VTYPE = {"C": "C", "B": "B", "I": "I"}
 
@@ -133,10 +138,35 @@ def _log_sos2(model: MipModel) -> tuple[MipModel, list[Any]]:
     return out, native
 
 
+@contextmanager
+def c_stderr() -> Iterator[list[str]]:
+    """What is written to file descriptor 2 inside the block (C code's ``stderr``: SCIP's
+    error messages such as "unresolved numerical troubles in LP", which its quiet message
+    handler does not silence), as the one string the yielded list holds after the block;
+    the terminal sees none of it."""
+    said: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            said.append(tmp.read().decode(errors="replace").strip())
+
+
 def optimize_scip(m: Any, x: list[Any], model: MipModel, t0: float) -> dict[str, Any]:
     """Solve a model from :func:`build_scip`; the raw fields of a
-    :class:`~stability.mip.MipResult` (``time_s`` counted from ``t0``)."""
-    m.optimize()
+    :class:`~stability.mip.MipResult` (``time_s`` counted from ``t0``). What SCIP writes to
+    ``stderr`` (:func:`c_stderr`) ends the message, or the exception's, not the terminal."""
+    try:
+        with c_stderr() as said:
+            m.optimize()
+    except Exception as e:
+        raise RuntimeError(f"{e}; SCIP said: {said[0]}" if said and said[0] else str(e)) from e
     status = m.getStatus()
     name = {
         "optimal": "optimal",
@@ -154,7 +184,7 @@ def optimize_scip(m: Any, x: list[Any], model: MipModel, t0: float) -> dict[str,
         "objective": float(m.getSolObjVal(sol)) if sol is not None else None,
         "bound": float(m.getDualbound()) if name in ("optimal", "timeout") else math.nan,
         "nodes": int(m.getNNodes()),
-        "message": f"SCIP status {status!r}",
+        "message": f"SCIP status {status!r}" + (f"; SCIP said: {said[0]}" if said[0] else ""),
         "time_s": time.perf_counter() - t0,
         "size": f"{model.n_vars} variables, native indicators and SOS2",
     }
