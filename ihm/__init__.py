@@ -4,14 +4,11 @@
 >>> model, data = ihm.load_scene("barrett_box")          # doctest: +SKIP
 >>> grasp = ihm.grasp_from_mujoco(model, data)            # doctest: +SKIP
 >>> grasp.equilibrium_residuals()                         # doctest: +SKIP
+
+Importing it changes nothing outside it (no environment variable): the offscreen renderer
+picks its OpenGL backend when it is created (:mod:`ihm.render`: ``MUJOCO_GL``, else EGL on
+Linux).
 """
-
-import os
-import sys
-
-if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    # MuJoCo picks its GL backend at import; without a display only EGL works offscreen
-    os.environ.setdefault("MUJOCO_GL", "egl")
 
 from .contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates, transmission
 from .scenes import SceneError, SettleInfo, available_scenes, load_scene, scene_about, settle

@@ -10,6 +10,7 @@ back-import, to show that a violation fails with a message naming the import.
 from __future__ import annotations
 
 import ast
+import os
 import shutil
 import subprocess
 import sys
@@ -136,3 +137,20 @@ def test_the_private_name_check_catches_both_forms() -> None:
         "l.4: geometry._z",
     ]
     assert private_crossings("from .a import _b\n", "envs.a") == []  # its own name
+
+
+def test_importing_the_packages_has_no_side_effects() -> None:
+    """``import stability, ihm, envs, shields, train`` in a fresh interpreter leaves the
+    environment variables as they were and prints nothing (measured after the third-party
+    packages they use are imported: gymnasium sets one of its own)."""
+    code = (
+        "import os, json, mujoco, gymnasium, stable_baselines3, torch, highspy, pyscipopt; "
+        "before = dict(os.environ); "
+        "import stability, ihm, envs, shields, train; "
+        "print(json.dumps(sorted(set(os.environ.items()) ^ set(before.items()))))"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                       text=True, timeout=300)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "[]" and p.stderr == "", (p.stdout, p.stderr)
