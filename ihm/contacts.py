@@ -1,7 +1,7 @@
 """MuJoCo contact data to a spatial :class:`stability.Grasp`.
 
-Conventions (DESIGN.md): everything is expressed in the *object frame*, the
-frame of the MuJoCo body ``object_body`` (origin at the body origin, axes of
+Conventions (docs/design.md, Conventions): everything is expressed in the *object
+frame*, the frame of the MuJoCo body ``object_body`` (origin at the body origin, axes of
 ``data.xmat``). A contact frame is ``[n, t1, t2]`` with ``n`` pointing INTO the
 object; contact forces ``c = (c_n, c_t1, c_t2)`` are forces of the hand on the
 object in that frame [N]. ``G`` gives the wrench about the object-frame origin

@@ -1,9 +1,10 @@
 """The hand's statics read off MuJoCo: independent coordinates, transmission, stops.
 
-The grasp model (thesis ch. 5, DESIGN.md) needs, over the hand's independent joint
-motions ``q`` (``l`` of them): the contact Jacobian ``J``, and the transmission ``R``
-(``l x a``) with hand equilibrium ``J^T c = R f``. A hand read from MuJoCo can carry
-more than actuators. :func:`hand_model` maps each element to what the model has:
+The grasp model (thesis ch. 5; docs/design.md, Conventions) needs, over the hand's
+independent joint motions ``q`` (``l`` of them): the contact Jacobian ``J``, and the
+transmission ``R`` (``l x a``) with hand equilibrium ``J^T c = R f``. A hand read from
+MuJoCo can carry more than actuators. :func:`hand_model` maps each element to what the
+model has:
 
 * **Equality constraints** of every kind MuJoCo reports (``connect``, ``weld``,
   ``joint``, ``tendon``) between hand bodies or joints: a closed linkage. Their rows of

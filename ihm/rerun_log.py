@@ -130,7 +130,7 @@ def object_contacts(
     Unlike :func:`ihm.grasp_from_mujoco` this takes any ``condim`` (the torsional and
     rolling components of ``condim`` 4 and 6 are not reported) and any other body, and
     merges nothing: one row per MuJoCo contact that has constraint rows (``efc_address
-    >= 0``). The force is that of the other body on the object (DESIGN.md's sign), in
+    >= 0``). The force is that of the other body on the object (docs/design.md's sign), in
     world coordinates: ``mj_contactForce`` gives the force of ``geom1`` on ``geom2`` in
     the contact frame, negated where the object is ``geom1`` (as in :mod:`ihm.contacts`).
     """

@@ -2,7 +2,7 @@
 ``python -m train.bench shield accuracy|latency|effect``.
 
 The shield benchmarks load the shipped policy, which lives in ``train``, and nothing below
-``train`` imports it (the layers of DESIGN.md). This stub only prints the new command (with
+``train`` imports it (the layers of docs/design.md). This stub only prints the new command (with
 the same arguments) and exits with status 2; it imports nothing from ``train``.
 """
 

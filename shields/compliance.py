@@ -6,8 +6,8 @@ servo setpoints ``dq`` (thesis eq. "linearization")::
 
     [c; u]_{t+1} ~ [c; u]_t + [E; F] dq
 
-Conventions (DESIGN.md, with the axes stated here)
--------------------------------------------------
+Conventions (docs/design.md, with the axes stated here)
+-------------------------------------------------------
 * Contact ``i`` has the frame ``[n, t1, t2]`` (rows, world coordinates), ``n`` pointing INTO
   the object; ``c_i = (c_n, c_t1, c_t2)`` is the force of the hand on the object in it [N].
   Where contacts have torsional friction (MuJoCo ``condim`` 4, the four-finger env), each

@@ -1,6 +1,6 @@
 """The grasp model: contact points, frames, friction, grasp map and hand matrices.
 
-Conventions (DESIGN.md, thesis ch. 4-5):
+Conventions (docs/design.md, Conventions; thesis ch. 4-5):
 
 * A contact has an orthonormal frame ``[n, t]`` (planar) or ``[n, t1, t2]``
   (spatial). ``n`` points INTO the object: the direction in which the hand

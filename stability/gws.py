@@ -29,7 +29,7 @@ radius is ``mu cos(pi / edges)``).
 Forces are parametrised by non-negative edge weights ``lam >= 0``:
 ``c_i = sum_k lam_ik e_k``, so ``c_in = sum_k lam_ik``.
 
-Conventions follow DESIGN.md: contact frames ``[n, t]`` / ``[n, t1, t2]`` with
+Conventions follow docs/design.md: contact frames ``[n, t]`` / ``[n, t1, t2]`` with
 ``n`` pointing into the object, forces applied by the hand on the object [N],
 wrenches ``(fx, fy, tz)`` or ``(fx, fy, fz, tx, ty, tz)`` about the object-frame
 origin [N, N m].

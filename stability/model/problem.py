@@ -18,8 +18,8 @@ displacement is measured in newtons):
 * hands (``J`` given; ``R`` defaults to the identity): joint motion ``q`` (free),
   actuator forces ``f in [f_c, f_c + E]``, transmission motion ``v = R^T (q - q_ref) in
   [0, V]`` (eq. underac_nonbackdrive; ``q_ref = 0`` unless a preload state is given),
-  hand equilibrium ``J^T c = R f`` (eqs. hand_eq and torqueRatio in DESIGN.md's sign
-  convention: ``c`` acts on the object, ``-c`` on the hand), and per actuator (eq.
+  hand equilibrium ``J^T c = R f`` (eqs. hand_eq and torqueRatio in the sign convention
+  of docs/design.md: ``c`` acts on the object, ``-c`` on the hand), and per actuator (eq.
   binary_actuator) ``z = 1`` (locked) ``=> v = 0``, ``z = 0`` (moving) ``=> f = f_c``.
 
 The bounds ``B, V, E`` are not arbitrary big-M constants: :func:`scale_bounds` derives

@@ -1,5 +1,6 @@
-"""The shape of the house (DESIGN.md, issue 26): one-way layers, no circles, rooms of
-readable size, no private name crossing a module boundary.
+"""The shape of the house (docs/design.md, Packages and the import rule; Files and tests):
+one-way layers, no circles, rooms of readable size, no private name crossing a module
+boundary.
 
 The layers ``stability <- ihm <- envs <- shields <- train`` and the absence of import circles
 are import-linter contracts in ``pyproject.toml`` (``lint-imports`` checks them, lazy imports
@@ -20,7 +21,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("stability", "ihm", "envs", "shields", "train")
-MAX_LINES = 650  # DESIGN.md: about 650 lines per module at most
+MAX_LINES = 650  # docs/design.md, Files and tests: about 650 lines per module at most
 # a module may exceed MAX_LINES only if its docstring says why, with this phrase
 EXCEPTION_PHRASE = "over 650 lines"
 
