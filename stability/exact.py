@@ -1,6 +1,6 @@
 """``method="exact"``: the exact nonconvex problem solved globally by SCIP's spatial
 branch-and-bound (the thesis' "future work" alternative to ch. 6; our accuracy reference).
-Formerly ``method="spatial"``, which still works and warns (``DeprecationWarning``).
+``method="spatial"`` is an alias that warns (``DeprecationWarning``).
 
 The exact model of ch. 5 (:class:`~stability.model.problem.ExactProblem`: unilateral springs with
 preload, nonbackdrivable actuators, object and hand equilibrium, the binaries ``y`` and
@@ -31,7 +31,7 @@ time-out returns ``status="timeout"`` with SCIP's incumbent and dual bound in
 SCIP stops, default 1e-4), ``bound_factor``, ``verbose``, ``normal_uncertainty`` (eta: the
 spring law uses ``d_n cos eta + s_i sin eta``, the worst normal within eta, as
 ``refinement`` does), ``motion_bound``, ``feastol`` (SCIP's feasibility tolerance, default
-its own 1e-6; 1e-9 made SoPlex ask for 1e-12), ``presolve`` (SCIP's presolve, default
+its own 1e-6; 1e-9 makes SoPlex ask for 1e-12), ``presolve`` (SCIP's presolve, default
 True), ``recheck`` (default True; "Rechecks" below). Backend: SCIP only (HiGHS has no
 nonlinear rows).
 
@@ -47,54 +47,28 @@ to SCIP's tolerances and the gap, and its time grows quickly with the number of 
 (``python -m stability.bench tradeoff``; docs/bench/stability.md).
 
 Unpolished points. Where the LP polish fails (SCIP's binaries admit no exact mode LP),
-SCIP's own point is returned, and it can slide contacts by SCIP's tolerance with friction
-inside the cone: on seed 84 of the survey below (cap 0.72) every contact slides by 1e-4
-(3.6e-6 of the largest contact motion) carrying friction 27 N off its slide, a product of
-2.5e-3 within the product's tolerance ``1e-6 (1 + B) (1 + max |d_t|)`` of 0.011 (``B`` 1.1e4).
-The value is right (0.362431 for 0.362424); the point is not exact. Maximum dissipation as
-a force, ``stats["violations"]["alignment"]`` (the ``slide_alignment`` residual, which
-``Solution.max_residual()`` covers), shows it. Such a point is not exact, so its value
-bounds nothing: beyond ``ALIGN_RTOL (1 + B)`` the answer keeps SCIP's value but its
-feasible side (MaxDisturbance ``lower``, OptimalCommands ``upper``) is None, it is not
-certified, and ``stats["inexact_point"]`` says why (on 10 solved survey cases 3 first
-solves and 5 rechecks gave such points, all with values within 1e-4 of refinement's; on
-bench grasp (d)'s direction 3, cap 100, SCIP's point is off by 28 N, and refinement finds
-no exact point there either). ``stats["polished"]`` is False for them.
+SCIP's own point is returned; it can slide contacts by SCIP's tolerance with friction
+inside the cone, a product within the tolerance ``1e-6 (1 + B) (1 + max |d_t|)`` whose
+value is right but whose point is not exact. Maximum dissipation as a force,
+``stats["violations"]["alignment"]`` (the ``slide_alignment`` residual, which
+``Solution.max_residual()`` covers), shows it; beyond ``ALIGN_RTOL (1 + B)`` the answer keeps
+SCIP's value but its feasible side (MaxDisturbance ``lower``, OptimalCommands ``upper``) is
+None, it is not certified, and ``stats["inexact_point"]`` says why; ``stats["polished"]`` is
+False.
 
 Rechecks. SCIP's spatial branch-and-bound prunes wrongly now and then, and no single
-setting prevents it. A survey (``random_fingers(default_rng(seed), 3)`` with
-``bench.grasps.balanced_commands``, one ``bench.grasps._unit`` direction, cap 100; against
-``refinement`` with ``levels=9``, whose relaxation bounds the optimum from above up to its
-cone excess of 1e-6), this module's defaults before the rechecks:
-
-* seeds 0-29, 60 s each: ``exact`` solved 14 (5 at the cap), ``feastol=1e-8`` 10; all
-  within 1e-4 of refinement (its time: 0.5-14 s; the rest time out);
-* seeds 30-89, 45 s each: 8 solved; seed 51 "unstable" (SCIP's presolved model
-  infeasible, 17 s at cap 100, 0.07 s at cap 10) where refinement gives 0.141744 and
-  ``exact`` holds ``Existence`` at s = 0.1 and 0.14; ``feastol=1e-8``, ``motion_bound=1``
-  and ``cap=10`` all said "unstable" too; without presolve 0.141744 (88 s);
-* without presolve, on the 10 solved cases below the cap: seed 84 0.250946 with SCIP's
-  dual bound equal to it, where the optimum is 0.362424 (31 % low, like issue 27's
-  0.37744 for 0.46300, which ``feastol=1e-8``, ``cap=10`` or ``motion_bound=1`` fixed);
-  the other 9 within 1.3e-4;
-* the same 10 with the cap fitted to the answer (2 v): all within 1e-4 of refinement,
-  in 3.4-40 s (median 5 s) where the first solve took 7.5-71 s.
-
-So two rechecks, both on by default: an "infeasible" is solved once more without presolve
-(as the MIP methods do, :func:`stability.model.run.run`; ``stats["infeasible_rechecked"]``
-is that solve's status; seed 51 then answers 0.141744 in 110 s instead of "unstable"),
-and a MaxDisturbance optimum ``v`` below the cap is solved once more in a box fitted to it
-(cap ``max(2 v, 1e-3 cap)``, doubled while the answer reaches it; ``stats["recheck"]``):
-a higher checked point there (beyond the gap) is returned and the disagreement reported
-(``stats["recheck"]["disagreement"]``, ``stats["message"]``: seed 84 without presolve
-then answers 0.362431, not 0.250946); a higher SCIP optimum whose point fails the exact
-conditions ends the query as ``status="error"`` with the first value in
-``stats["incumbent"]``, never the first value as the answer. Within the gap the first
-point is kept. The rechecks add the fitted solve's time (above: 3.4-40 s; 10 survey cases
-took 12.5-56 s in all where their first solves took 7.5-71 s). They bound what a wrong
-prune can do; they prove nothing: an optimum wrongly pruned beyond twice the returned
-value, or in both boxes alike, stays unseen. ``recheck=False`` gives one solve (neither
-recheck).
+setting prevents it (the survey that showed it: docs/notebook/2026-11-28-exact-rechecks.md).
+Two rechecks, both on by default (``recheck=False`` gives one solve): an "infeasible" is
+solved once more without presolve (as the MIP methods do, :func:`stability.model.run.run`;
+``stats["infeasible_rechecked"]`` is that solve's status); and a MaxDisturbance optimum
+``v`` below the cap is solved once more in a box fitted to it (cap ``max(2 v, 1e-3 cap)``,
+doubled while the answer reaches it; ``stats["recheck"]``): a higher checked point there
+(beyond the gap) is returned and the disagreement reported
+(``stats["recheck"]["disagreement"]``, ``stats["message"]``); a higher SCIP optimum whose
+point fails the exact conditions ends the query as ``status="error"`` with the first value
+in ``stats["incumbent"]``. Within the gap the first point is kept. The rechecks bound what a
+wrong prune can do; they prove nothing: an optimum wrongly pruned beyond twice the returned
+value, or in both boxes alike, stays unseen.
 
 Brackets (``sol.lower``/``sol.upper``, ``stats["certified"]``): the returned checked point's
 value on the feasible side, SCIP's dual bound *in the query's box* on the other
@@ -102,15 +76,12 @@ value on the feasible side, SCIP's dual bound *in the query's box* on the other
 row of ``stats["recheck"]["solves"]``). A disagreement (a checked point above the first
 optimum by more than ``RECHECK_RTOL`` relative, or above the query box's dual bound by
 more than the gap; a fitted optimum below the checked first point by more than
-``RECHECK_RTOL``; the ``status="error"`` above) shows SCIP pruning wrongly on this very
-query, so its dual bound proves nothing there: ``upper`` is None and ``certified`` False.
-A recheck stopped by the time limit (``stats["recheck"]["stopped"]``, ``stats["message"]``)
-leaves SCIP's bracket, not ``certified``: under load a 120 s limit once cut seed 84's
-recheck, and its 0.250946 came back with the dual bound equal to it.
-Without either the bracket is SCIP's, as before the rechecks; seed 84 shows that a dual
-bound can be wrong, so ``certified`` is "SCIP's bound met", not a proof. A time-out's
-feasible side is SCIP's incumbent only where its point, polished, passes the same checks
-(``stats["incumbent_checked"]``); otherwise that side is None.
+``RECHECK_RTOL``; the ``status="error"`` above) shows SCIP pruning wrongly on this query,
+so its dual bound proves nothing there: ``upper`` is None and ``certified`` False. A
+recheck stopped by the time limit (``stats["recheck"]["stopped"]``, ``stats["message"]``)
+leaves SCIP's bracket, not ``certified``. ``certified`` means "SCIP's bound met", not a
+proof. A time-out's feasible side is SCIP's incumbent only where its point, polished,
+passes the same checks (``stats["incumbent_checked"]``); otherwise that side is None.
 
 The box. Every bound above holds for motions inside the box (``bound_factor``, default
 :data:`EXACT_BOUND_FACTOR` = 100 times the force scale). An optimisation answer whose
@@ -120,13 +91,8 @@ again, at most :data:`BOX_RETRIES` times within the same time limit
 (``stats["box_enlarged"]`` lists the solves). A larger box's answer replaces the smaller's
 when it is solved; a time-out or an error there leaves the answer found. An answer (or a
 time-out's checked incumbent) still at its box has no dual-bound side (MaxDisturbance
-``upper``, OptimalCommands ``lower`` None) and is not certified. Measured on a benchmark
-grasp ((a), an OptimalCommands of ``python -m stability.bench grasps --directions 3
---wrenches 3``): in the box of 100 SCIP timed out at 60 s and 150 s with an incumbent of
-0.32924 and a dual bound of 0.32902, where ``refinement``'s exact point costs 0.328696
-with a joint motion of 2.4e4 force units; in the box of 1e3 ``exact`` gives 0.328697 in 12
-s, with a motion at that box too. A larger default box is slower where it does not bind
-(three other queries of that grasp and of (d): 2.5-4x), hence 100 and the retries.
+``upper``, OptimalCommands ``lower`` None) and is not certified. A larger default box is
+slower where it does not bind, hence 100 and the retries.
 """
 
 from __future__ import annotations

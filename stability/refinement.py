@@ -607,13 +607,10 @@ def _solve_refinement(grasp: Grasp, query: Any, **options: Any) -> Solution:
     # at most BOX_RETRIES times, within the same time limit.
     t0 = time.perf_counter()
     limit = options.get("time_limit")
-    # The box: 1e3 times the force scale. Sliding and joint motions that load no spring are
-    # virtual and can be large: on a benchmark grasp (python -m stability.bench grasps, (a))
-    # the cheapest commands for a wrench move a joint by 7e4 force units, and at the other
-    # methods' 100 the relaxation's "optimum" was 9.6 % too high, certified within its box;
-    # 1e3, 1e4 and 1e5 give the same answer. A larger box weakens the MIPs' relaxations: a
-    # 6-contact round took 0.6 s at 100, 10.5 s at 1e3, and at 1e4 SCIP's presolve called
-    # feasible rounds infeasible (caught by the recheck without presolve, which is slow).
+    # The box: REFINEMENT_BOUND_FACTOR times the force scale. Sliding and joint motions that
+    # load no spring are virtual and can be large, so a small box can cut the optimum off;
+    # a large one weakens the MIPs' relaxations (the measurements behind 1e3:
+    # docs/notebook/2026-11-28-exact-rechecks.md, "refinement's box").
     options.setdefault("bound_factor", REFINEMENT_BOUND_FACTOR)
     factor = float(options["bound_factor"])
     cuts: list[str] = []

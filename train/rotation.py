@@ -118,7 +118,7 @@ __all__ = [
 
 ENV_ID = "ihm/FourFingerRotate-v0"
 POLICY_DT = TIMESTEP * FRAME_SKIP  # [s] 0.05: the thesis' 20 Hz policy
-TARGET_SPEED = 0.5  # [rad/s] the task's target (issue 11), over 20 s episodes; drops <= 5 %
+TARGET_SPEED = 0.5  # [rad/s] the task's target, over 20 s episodes; drops <= 5 %
 MAX_DROP_RATE = 0.05  # the task's drop target
 SHIELD_KEYS = ("shield_episode_interventions", "shield_episode_seconds")  # monitor.csv columns
 

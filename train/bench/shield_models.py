@@ -1,4 +1,4 @@
-"""Criteria against models: ``python -m train.bench shield models`` (issue 30).
+"""Criteria against models: ``python -m train.bench shield models``.
 
 Separates the two reasons a grasp shield can fail: what it asks (its criteria, a
 :class:`shields.ShieldLimits`) and how it predicts (its model). Each criteria set is judged
