@@ -86,6 +86,7 @@ __all__ = [
     "contact_frame_force",
     "grasp_from_mujoco",
     "hand_coordinates",
+    "object_contact_ids",
     "transmission",
 ]
 
@@ -216,6 +217,30 @@ def body_subtree(model: mujoco.MjModel, root: int) -> NDArray[np.bool_]:
     return inside
 
 
+def object_contact_ids(
+    data: mujoco.MjData, geom_is_object: list[bool]
+) -> list[tuple[int, int, bool]]:
+    """The object's active contacts in ``data.contact``: ``(i, other, object_is_geom1)`` for
+    each contact ``i`` with constraint rows (``efc_address >= 0``, not excluded) between a
+    geom of the object and one that is not (``other``: that geom's id). ``geom_is_object``
+    (per geom, a plain list for speed: ``in_obj[model.geom_bodyid].tolist()`` for the
+    object's subtree) says which geoms are the object's. The one reader of the object's
+    contacts: grasps, recordings, shields, env observations and the shield benchmarks."""
+    if data.ncon == 0:
+        return []
+    c = data.contact
+    out = []
+    for i, ((g1, g2), adr, ex) in enumerate(
+        zip(c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist(), strict=True)
+    ):
+        if adr < 0 or ex:
+            continue
+        o1, o2 = geom_is_object[g1], geom_is_object[g2]
+        if o1 != o2:
+            out.append((i, g2 if o1 else g1, o1))
+    return out
+
+
 def hand_coordinates(
     model: mujoco.MjModel, data: mujoco.MjData, object_body: str = "object"
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], list[str]]:
@@ -311,20 +336,14 @@ def grasp_from_mujoco(
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
     groups: list[dict[str, Any]] = []
-    for i in range(data.ncon):
+    for i, _, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
         con = data.contact[i]
-        if con.exclude != 0 or con.efc_address < 0:
-            continue
-        b1, b2 = model.geom_bodyid[con.geom1], model.geom_bodyid[con.geom2]
-        if in_obj[b1] == in_obj[b2]:
-            continue  # not between object and hand
         if con.dim > 3:
             raise GraspError(
                 f"contact {i} ({model.geom(con.geom1).name or con.geom1} / "
                 f"{model.geom(con.geom2).name or con.geom2}) has condim {con.dim}: torsional or "
                 "rolling friction is not in the point-contact model; use condim 1 or 3"
             )
-        obj_first = bool(in_obj[b1])
         frame, force = contact_frame_force(model, data, i, obj_first)
         hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))

@@ -36,7 +36,7 @@ import numpy as np
 import rerun as rr
 from numpy.typing import ArrayLike, NDArray
 
-from .contacts import SceneGrasp, contact_frame_force
+from .contacts import SceneGrasp, contact_frame_force, object_contact_ids
 
 __all__ = ["ObjectContacts", "SceneRecorder", "log_scene", "object_contacts"]
 
@@ -139,17 +139,11 @@ def object_contacts(
     except (KeyError, IndexError) as exc:
         raise ValueError(f"no body {object_body!r} in the model") from exc
     points, forces, bodies = [], [], []
-    for i in range(data.ncon):
-        con = data.contact[i]
-        if con.efc_address < 0 or con.exclude:
-            continue
-        b1, b2 = int(model.geom_bodyid[con.geom1]), int(model.geom_bodyid[con.geom2])
-        if (b1 == obj) == (b2 == obj):  # neither, or the object with itself
-            continue
-        frame, c = contact_frame_force(model, data, i, object_is_geom1=b1 == obj)
-        points.append(con.pos.copy())
+    for i, other, obj_first in object_contact_ids(data, (model.geom_bodyid == obj).tolist()):
+        frame, c = contact_frame_force(model, data, i, object_is_geom1=obj_first)
+        points.append(data.contact[i].pos.copy())
         forces.append(frame.T @ c)
-        bodies.append(_body_name(model, b2 if b1 == obj else b1))
+        bodies.append(_body_name(model, int(model.geom_bodyid[other])))
     return ObjectContacts(
         points=np.array(points).reshape(-1, 3),
         forces=np.array(forces).reshape(-1, 3),

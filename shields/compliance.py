@@ -82,7 +82,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from ihm.contacts import body_subtree
+from ihm.contacts import body_subtree, object_contact_ids
 
 __all__ = ["GraspLinearization", "ShieldError", "linearize"]
 
@@ -196,6 +196,7 @@ class _HandInfo:
         self.names = [model.body(b).name for b in range(model.nbody)]
         self.nbody = model.nbody
         self.geom_body = model.geom_bodyid.tolist()
+        self.geom_in_obj = [self.in_obj[b] for b in self.geom_body]
         self.static = (model.body_weldid == 0).tolist()
 
 
@@ -252,26 +253,18 @@ def linearize(
     if not horizon > 0 or not np.isfinite(horizon):
         raise ShieldError(f"horizon must be a finite number > 0 [s], got {horizon!r}")
     info = _info(model, object_body)
-    in_obj, obj, geom_body = info.in_obj, info.obj, info.geom_body
+    obj, geom_body = info.obj, info.geom_body
     n_servo = len(info.dofs)
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
     ids, bodies, sign, dims = [], [], [], []
     con = data.contact
-    if data.ncon:
-        geom, adr = con.geom.tolist(), con.efc_address.tolist()
-        excl, dim = con.exclude.tolist(), con.dim.tolist()
-        for i, (g1, g2) in enumerate(geom):
-            if adr[i] < 0 or excl[i]:
-                continue
-            b1, b2 = geom_body[g1], geom_body[g2]
-            o1 = in_obj[b1]
-            if o1 == in_obj[b2]:
-                continue
-            ids.append(i)
-            bodies.append(b2 if o1 else b1)
-            sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
-            dims.append(dim[i])
+    dim = con.dim.tolist()
+    for i, other, o1 in object_contact_ids(data, info.geom_in_obj):
+        ids.append(i)
+        bodies.append(geom_body[other])
+        sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
+        dims.append(dim[i])
     m = len(ids)
     if m == 0:
         z = np.zeros

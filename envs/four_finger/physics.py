@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import ihm.scenes
+from ihm.contacts import object_contact_ids
 from ihm.hands import four_finger as ff
 
 __all__ = [
@@ -239,18 +240,12 @@ class Physics:
         the two bodies at the contact point in the contact frame, from the last substep), 0
         without such a contact."""
         d = self.data
-        if d.ncon == 0:
-            return 0.0
-        c = d.contact
-        geom, adr, excl = c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist()
-        v = d.efc_vel
-        slot, is_obj = self.slot, self.is_obj
+        v, adr, slot = d.efc_vel, d.contact.efc_address, self.slot
         total, n = 0.0, 0
-        for i, (g1, g2) in enumerate(geom):
-            s = slot[g1] if is_obj[g2] else slot[g2] if is_obj[g1] else -1
-            a = adr[i]
-            if s < 0 or a < 0 or excl[i]:
+        for i, other, _ in object_contact_ids(d, self.is_obj):
+            if slot[other] < 0:
                 continue
+            a = int(adr[i])
             total += math.hypot(v[a + 1], v[a + 2])
             n += 1
         return total / n if n else 0.0
@@ -265,26 +260,15 @@ class Physics:
         pos = np.zeros((n_links, 3))
         fn = np.zeros(n_links)
         d = self.data
-        if d.ncon == 0:
-            return pos, fn, 0
-        c = d.contact
-        geom, adr, excl = c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist()
-        p, ef = c.pos, d.efc_force
-        slot, is_obj = self.slot, self.is_obj
+        p, adr, ef, slot = d.contact.pos, d.contact.efc_address, d.efc_force, self.slot
         count = [0] * n_links
         k = 0
-        for i, (g1, g2) in enumerate(geom):
-            if is_obj[g2]:
-                s = slot[g1]
-            elif is_obj[g1]:
-                s = slot[g2]
-            else:
-                continue
-            a = adr[i]
-            if s < 0 or a < 0 or excl[i]:
+        for i, other, _ in object_contact_ids(d, self.is_obj):
+            s = slot[other]
+            if s < 0:
                 continue
             pos[s] += p[i]
-            fn[s] += ef[a]
+            fn[s] += ef[int(adr[i])]
             count[s] += 1
             k += 1
         for s, cnt in enumerate(count):

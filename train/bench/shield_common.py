@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from envs.four_finger import CONTACT_LINKS, FourFingerRotate
-from ihm.contacts import body_subtree
+from ihm.contacts import body_subtree, object_contact_ids
 from stability.cli import ArgumentParser
 from stability.io import write_csv
 from train.policy import SHIPPED, load_policy
@@ -100,24 +100,8 @@ class Links:
 
     def contacts(self, data: mujoco.MjData) -> list[tuple[int, int]]:
         """``(link index, contact index)`` of every active finger-link/object contact."""
-        out = []
-        if data.ncon == 0:
-            return out
-        c = data.contact
-        for i, ((g1, g2), adr, ex) in enumerate(
-            zip(c.geom.tolist(), c.efc_address.tolist(), c.exclude.tolist(), strict=True)
-        ):
-            if adr < 0 or ex:
-                continue
-            if self.geom_obj[g1] and not self.geom_obj[g2]:
-                k = self.geom_link[g2]
-            elif self.geom_obj[g2] and not self.geom_obj[g1]:
-                k = self.geom_link[g1]
-            else:
-                continue
-            if k >= 0:
-                out.append((k, i))
-        return out
+        found = object_contact_ids(data, self.geom_obj)
+        return [(self.geom_link[g], i) for i, g, _ in found if self.geom_link[g] >= 0]
 
     def touching(self, data: mujoco.MjData) -> set[int]:
         """Indices (into CONTACT_LINKS) of the finger links touching the object."""
