@@ -218,8 +218,8 @@ def contact_table(model: mujoco.MjModel, grasp: SceneGrasp) -> str:
 def _cmd_show(args: argparse.Namespace) -> int:
     from .render import render_png  # after MUJOCO_GL is set (it is, at the top)
 
-    model, data = scenes.load_scene(args.scene, preload=args.preload)
-    info = scenes.last_settle
+    loaded = scenes.load_scene(args.scene, preload=args.preload)
+    model, data, info = loaded.model, loaded.data, loaded.settle_info
     grasp = grasp_from_mujoco(model, data)
     print(f"scene {args.scene}: {scenes.scene_about(args.scene)}")
     if info is not None:

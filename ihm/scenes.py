@@ -35,6 +35,7 @@ from .ratchet import Ratchet, actuated_joints, actuated_tendons
 
 __all__ = [
     "SCENES_DIR",
+    "LoadedScene",
     "SceneError",
     "SettleInfo",
     "available_scenes",
@@ -125,6 +126,22 @@ class SettleInfo:
     rounds: int = 1
     force_error: float = 0.0
     contacts: int = 0
+
+
+@dataclass(frozen=True)
+class LoadedScene:
+    """What :func:`load_scene` returns: the compiled ``model``, its ``data`` at rest, the
+    ``settle_info`` of the settle that brought it there (None with ``settle_grasp=False``)
+    and the ``ratchet`` on its nonbackdrivable transmission (None unless
+    ``nonbackdrivable``). It unpacks as ``model, data``."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    settle_info: SettleInfo | None
+    ratchet: Ratchet | None
+
+    def __iter__(self) -> Iterator[mujoco.MjModel | mujoco.MjData]:
+        return iter((self.model, self.data))
 
 
 def _as_forces(value: ArrayLike, nu: int) -> NDArray[np.float64]:
@@ -434,7 +451,7 @@ def load_scene(
     seat: ArrayLike | None = None,
     gravity: bool = True,
     **settle_kwargs: float,
-) -> tuple[mujoco.MjModel, mujoco.MjData]:
+) -> LoadedScene:
     """Load scene ``name`` and settle its grasp.
 
     Parameters
@@ -448,7 +465,7 @@ def load_scene(
         driven by a plain motor (the Barrett fingers' worm gears) and every actuated tendon
         (the tendon gripper's transmission): the stops sit at the settled pose and follow
         as the fingers close when the ratchet's ``update`` or ``step`` is used. The
-        ratchet is ``ihm.scenes.last_ratchet``.
+        ratchet is the result's ``ratchet``.
     seat : with ``nonbackdrivable``, the thesis' protocol for preloading chosen actuators
         only (grasp example 2: "preload applied exclusively by finger 1"; the tendon
         gripper's "actively loading the distal tendon only"): first settle with the
@@ -468,10 +485,9 @@ def load_scene(
 
     Returns
     -------
-    (model, data) with ``data`` at rest; ``data.ctrl`` holds the commands and
-    the settle report is in ``ihm.scenes.last_settle``.
+    :class:`LoadedScene`: the model, ``data`` at rest (``data.ctrl`` holds the commands), the
+    settle report and the ratchet; it unpacks as ``model, data``.
     """
-    global last_settle, last_ratchet
     path = scene_path(name)
     try:
         model = mujoco.MjModel.from_xml_path(str(path))
@@ -500,30 +516,27 @@ def load_scene(
         if seat_c.shape != (model.nu,):
             raise SceneError(f"seat for scene {name!r} needs {model.nu} actuator forces, "
                              f"got shape {seat_c.shape}")  # fmt: skip
-    last_ratchet = None
+    report: SettleInfo | None = None
+    ratchet: Ratchet | None = None
     if not settle_grasp:
         data.ctrl[:] = 0.0
         mujoco.mj_forward(model, data)
     elif seat_c is None:
-        last_settle = settle(model, data, f_c, **settle_kwargs)
+        report = settle(model, data, f_c, **settle_kwargs)
     else:
         with _gravity_off(model):  # the object placed in the hand, the fingers closed lightly
             settle(model, data, seat_c, **{"grip_s": 0.0, "rounds": 1, **settle_kwargs})
-        last_ratchet = transmission_ratchet(model, data)
+        ratchet = transmission_ratchet(model, data)
         # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
         # spread servo and thumb, the elliptic friction cones against the stiff stops) while
         # positions stay within micrometres: rest means |qvel| < 1e-3 here
         kw = {"grip_s": 0.0, "rounds": 1, "vtol": 1e-3, **settle_kwargs}
-        last_settle = settle(model, data, f_c, ratchet=last_ratchet, **kw)
-    if nonbackdrivable and last_ratchet is None:
-        last_ratchet = transmission_ratchet(model, data)
-    return model, data
+        report = settle(model, data, f_c, ratchet=ratchet, **kw)
+    if nonbackdrivable and ratchet is None:
+        ratchet = transmission_ratchet(model, data)
+    return LoadedScene(model, data, report, ratchet)
 
 
 def transmission_ratchet(model: mujoco.MjModel, data: mujoco.MjData) -> Ratchet:
     """The scene's nonbackdrivable transmission: motor joints and actuated tendons."""
     return Ratchet(model, data, actuated_joints(model), tendons=actuated_tendons(model))
-
-
-last_settle: SettleInfo | None = None
-last_ratchet = None  # the Ratchet of the last load_scene(..., nonbackdrivable=True)

@@ -101,11 +101,12 @@ def _settled_state(
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Settle the scene (errors surface here, in the calling process); its state, the
     ratchet's stops (None unless nonbackdrivable) and the object's orientation at rest."""
-    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                                    seat=seat, gravity=gravity)  # fmt: skip
+    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
+                               seat=seat, gravity=gravity)  # fmt: skip
+    model, data = loaded
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
-    stops = None if scenes.last_ratchet is None else scenes.last_ratchet.stops.copy()
+    stops = None if loaded.ratchet is None else loaded.ratchet.stops.copy()
     return state, stops, data.xmat[model.body("object").id].reshape(3, 3).copy()
 
 
@@ -267,10 +268,11 @@ def _settled_grasp(
     centre of mass in the object frame."""
     from .contacts import grasp_from_mujoco
 
-    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                                    seat=seat, gravity=gravity)  # fmt: skip
-    if scenes.last_ratchet is not None:
-        scenes.last_ratchet.release()
+    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
+                               seat=seat, gravity=gravity)  # fmt: skip
+    model, data = loaded
+    if loaded.ratchet is not None:
+        loaded.ratchet.release()
     commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
     grasp = grasp_from_mujoco(model, data)
     if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R

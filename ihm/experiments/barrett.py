@@ -156,9 +156,10 @@ def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool =
     b = m0.body("object").id
     before = d0.xipos[b].copy()
     touching = touching_bodies(m0, d0, b)
-    model, data = scenes.load_scene(scene, preload=preload, nonbackdrivable=True, seat=seat,
-                                    gravity=gravity)  # fmt: skip
-    return model, data, scenes.last_ratchet, _rest_ok(model, data, before, touching)
+    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=True, seat=seat,
+                               gravity=gravity)  # fmt: skip
+    model, data = loaded
+    return model, data, loaded.ratchet, _rest_ok(model, data, before, touching)
 
 
 def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: str,

@@ -104,9 +104,10 @@ def settle_case(
 ) -> tuple[mujoco.MjModel, mujoco.MjData, SceneGrasp]:
     """``tendon_box`` settled with the thesis' protocol: seated with ``seat`` [N] (gravity
     off), both tendons ratcheted, then ``commands`` [N] with the ratchet following
-    (``ihm.scenes.last_ratchet`` holds the ratchet). Returns (model, data, grasp)."""
-    model, data = scenes.load_scene(SCENE, commands, nonbackdrivable=True, seat=seat)
-    return model, data, grasp_from_mujoco(model, data)
+    Returns the :class:`~ihm.scenes.LoadedScene` (its ``ratchet`` on the tendons) and the
+    grasp read off it."""
+    scene = scenes.load_scene(SCENE, commands, nonbackdrivable=True, seat=seat)
+    return scene, grasp_from_mujoco(scene.model, scene.data)
 
 
 def _predict(
@@ -147,11 +148,11 @@ def _simulate(commands: tuple[float, float], sign: float) -> dict[str, Any]:
     """Simulated resistance [N m] to a torque about the object's x-axis (world axes, the
     box's own axis as it rests), the ratchet on; a freshly settled scene per run."""
     t0 = time.perf_counter()
-    model, data, grasp = settle_case(commands)
+    scene, grasp = settle_case(commands)
     axis_world = grasp.object_mat[:, 0]
     direction = np.r_[0.0, 0.0, 0.0, sign * axis_world]
-    res = simulated_resistance(model, data, direction, cap=TORQUE_CAP_NM,
-                               ratchet=scenes.last_ratchet, check_rate=False,
+    res = simulated_resistance(scene.model, scene.data, direction, cap=TORQUE_CAP_NM,
+                               ratchet=scene.ratchet, check_rate=False,
                                stop_rule="distance")  # fmt: skip
     turned = res.trace[res.trace[:, 2] > ONSET_TURN_RAD]
     onset = float(turned[0, 0]) if len(turned) else float(res.value)
@@ -352,7 +353,7 @@ def tendon_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, An
     }
     drawn: dict[str, tuple[Any, Any, dict[str, Any]]] = {}
     for case, commands in CASES.items():
-        model, data, grasp = settle_case(commands)
+        (model, data), grasp = settle_case(commands)
         axes_err = float(np.abs(grasp.object_mat - np.eye(3)).max())
         model_f = _model_preload_forces(grasp, commands, {"time_limit": t_torque, "levels": levels})
         names = [model.body(b).name for b in grasp.hand_bodies]

@@ -17,8 +17,8 @@ LINKS = ("f1_prox", "f2_prox", "f3_prox")
 
 @pytest.fixture(scope="module")
 def settled():
-    model, data = ihm.load_scene("barrett_box_3d")
-    info = ihm.scenes.last_settle
+    scene = ihm.load_scene("barrett_box_3d")
+    model, data, info = scene.model, scene.data, scene.settle_info
     g = grasp_from_mujoco(model, data)
     links = [model.body(b).name for b in g.hand_bodies]
     contact = {name: links.index(name) for name in LINKS if name in links}

@@ -24,17 +24,24 @@ def _settle(preload=None, **kw):
 
 
 @pytest.fixture(scope="module")
-def cube():
-    return _settle()
+def cube_scene():
+    return ihm.load_scene("barrett_cube")
+
+
+@pytest.fixture(scope="module")
+def cube(cube_scene):
+    model, data = cube_scene
+    g = grasp_from_mujoco(model, data)
+    return model, data, g, [model.body(b).name for b in g.hand_bodies]
 
 
 def _contact(names, link):
     return names.index(link)
 
 
-def test_settles_fast_and_at_rest(cube):
+def test_settles_fast_and_at_rest(cube, cube_scene):
     model, data, g, _ = cube
-    info = ihm.scenes.last_settle
+    info = cube_scene.settle_info
     assert info.time_s < 8.0 and info.max_vel < 1e-4
     assert np.abs(data.qvel).max() < 1e-3
     limit = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)

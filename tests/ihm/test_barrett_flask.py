@@ -14,8 +14,8 @@ from ihm.contacts import grasp_from_mujoco
 
 @pytest.fixture(scope="module")
 def flask():
-    model, data = ihm.load_scene("barrett_flask")
-    info = ihm.scenes.last_settle
+    scene = ihm.load_scene("barrett_flask")
+    model, data, info = scene.model, scene.data, scene.settle_info
     g = grasp_from_mujoco(model, data)
     links = [model.body(b).name for b in g.hand_bodies]
     return model, data, g, links, info

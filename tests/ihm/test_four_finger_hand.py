@@ -27,8 +27,8 @@ _CACHE: dict[str, tuple] = {}
 def scene(request):
     name = request.param
     if name not in _CACHE:
-        model, data = ihm.scenes.load_scene(name)
-        info = ihm.scenes.last_settle
+        scene = ihm.scenes.load_scene(name)
+        model, data, info = scene.model, scene.data, scene.settle_info
         _CACHE[name] = (name, model, data, grasp_from_mujoco(model, data), info)
     return _CACHE[name]
 

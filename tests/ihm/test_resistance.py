@@ -242,11 +242,10 @@ def test_load_scene_nonbackdrivable_tendon_transmission() -> None:
     tendons lengthen back by about 1e-3 m in 0.5 s; with the ratcheted transmission the
     tendon lengths hold within the limit's softness."""
     import ihm
-    import ihm.scenes as scenes
 
     for nb in (False, True):
-        m, d = ihm.load_scene("tendon_box", nonbackdrivable=nb)
-        r = scenes.last_ratchet
+        scene = ihm.load_scene("tendon_box", nonbackdrivable=nb)
+        m, d, r = scene.model, scene.data, scene.ratchet
         assert (r is not None) == nb
         length = d.ten_length.copy()
         d.ctrl[:] = 0.0
@@ -347,10 +346,11 @@ def test_seat_protocol_passive_fingers_carry_reactions():
     finger 1 alone. The thumb and finger 2, commanded 0, are held by their ratchets: they
     carry contact forces with zero actuator force, and the reaction is the ratchet's limit
     force (thesis grasp example 2: "preload applied exclusively by finger 1")."""
-    model, data = ihm.load_scene(
+    scene = ihm.load_scene(
         "barrett_box_3d", preload=[0, 0.1, 0, 0], nonbackdrivable=True,
         seat=[0, 0.01, 0.01, 0.022],
     )  # fmt: skip
+    model, data = scene
     assert np.abs(data.qvel).max() < 1e-3
     g = grasp_from_mujoco(model, data)
     fn = {model.body(g.hand_bodies[k]).name: g.forces[k, 0] for k in range(g.m)}
@@ -359,8 +359,8 @@ def test_seat_protocol_passive_fingers_carry_reactions():
     limit = data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT
     held = {model.joint(j).name for j in data.efc_id[: data.nefc][limit]}
     assert {"f2_prox", "f3_prox"} <= held
-    stops = ihm.scenes.last_ratchet.stops
-    q = data.qpos[model.jnt_qposadr[ihm.scenes.last_ratchet.joints]]
+    stops = scene.ratchet.stops
+    q = data.qpos[model.jnt_qposadr[scene.ratchet.joints]]
     assert np.all(q >= stops - 2e-3)  # within the limit's softness of the stops
 
 
@@ -374,15 +374,14 @@ def test_seat_needs_nonbackdrivable():
 def test_new_contact_ends_the_run():
     """barrett_box pushed toward the palm (object +y) with no preload slides the 0.8 mm
     down to the palm face: the run ends at that new contact, before 2 mm of travel."""
-    model, data = ihm.load_scene(
+    scene = ihm.load_scene(
         "barrett_box", preload=[0, 0, 0, 0], nonbackdrivable=True, seat=[0, 0.01, 0.01, 0]
     )
+    model, data = scene
     b = model.body("object").id
     u = data.xmat[b].reshape(3, 3) @ [0.0, 1.0, 0.0]  # object +y = palm -z
     assert u[2] == pytest.approx(-1.0, abs=1e-3)
-    res = simulated_resistance(
-        model, data, np.r_[u, 0, 0, 0], cap=5, ratchet=ihm.scenes.last_ratchet
-    )
+    res = simulated_resistance(model, data, np.r_[u, 0, 0, 0], cap=5, ratchet=scene.ratchet)
     assert res.reason == "new contact: palm" and not res.capped
     assert res.shift < 0.002 and 0 < res.value < 5
 

@@ -31,8 +31,9 @@ _CACHE: dict[tuple, tuple] = {}
 def _scene(preload=None):
     key = None if preload is None else tuple(preload)
     if key not in _CACHE:
-        model, data = ihm.scenes.load_scene(SCENE, preload)
-        _CACHE[key] = (model, data, grasp_from_mujoco(model, data), ihm.scenes.last_settle)
+        scene = ihm.scenes.load_scene(SCENE, preload)
+        model, data = scene
+        _CACHE[key] = (model, data, grasp_from_mujoco(model, data), scene.settle_info)
     return _CACHE[key]
 
 
@@ -226,7 +227,7 @@ F = tendon.FORCE_N
 def _case(commands):
     key = ("ratchet", *commands)
     if key not in _CACHE:
-        model, data, g = tendon.settle_case(commands)
+        (model, data), g = tendon.settle_case(commands)
         _CACHE[key] = (model, data, g, tendon.passive_tensions(model, data))
     return _CACHE[key]
 
@@ -312,9 +313,9 @@ def test_torque_resistance_same_for_both_preloads():
     values = {}
     for commands in ((F, 0.0), (0.0, F)):
         for sign in (1.0, -1.0):
-            model, data, _ = tendon.settle_case(commands)
-            ratchet = ihm.scenes.last_ratchet
-            r = simulated_resistance(model, data, [0, 0, 0, sign, 0, 0],
+            scene, _ = tendon.settle_case(commands)
+            ratchet = scene.ratchet
+            r = simulated_resistance(scene.model, scene.data, [0, 0, 0, sign, 0, 0],
                                      cap=tendon.TORQUE_CAP_NM, ratchet=ratchet,
                                      check_rate=False, stop_rule="distance")  # fmt: skip
             assert not r.capped and r.turn > 0.05
