@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterable
-from typing import Any
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -276,6 +276,69 @@ def contact_frame_force(
     return frame, frame @ f_on_obj
 
 
+@dataclass
+class ContactGroup:
+    """One grasp contact: MuJoCo contacts between the same hand and object bodies, merged
+    (world frame). ``pair``: (hand geom, object geom) of the first; ``bodies``: (hand body,
+    object body); ``pos``: the merged contacts' positions [m]; ``frame``: rows n, t1, t2,
+    ``n`` into the object; ``force_world``: the summed force of the hand on the object
+    [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices."""
+
+    pair: tuple[int, int]
+    bodies: tuple[int, int]
+    pos: list[NDArray[np.float64]]
+    frame: NDArray[np.float64]
+    force_world: NDArray[np.float64]
+    mu: float
+    ids: list[int]
+
+
+def _read(
+    model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_]
+) -> list[ContactGroup]:
+    """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`);
+    :class:`GraspError` for a contact with torsional or rolling friction."""
+    out = []
+    for i, _, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
+        con = data.contact[i]
+        if con.dim > 3:
+            raise GraspError(
+                f"contact {i} ({model.geom(con.geom1).name or con.geom1} / "
+                f"{model.geom(con.geom2).name or con.geom2}) has condim {con.dim}: torsional or "
+                "rolling friction is not in the point-contact model; use condim 1 or 3"
+            )
+        frame, force = contact_frame_force(model, data, i, obj_first)
+        hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
+        bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
+        mu = 0.0 if con.dim == 1 else float(con.friction[0])
+        out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
+                                frame, frame.T @ force, mu, [i]))  # fmt: skip
+    return out
+
+
+def _merge(contacts: list[ContactGroup], merge_tol: float) -> list[ContactGroup]:
+    """Contacts between the same bodies within ``merge_tol`` [m] of a group's mean position
+    and with normals within 1e-3 rad merged into that group (forces summed, the smallest
+    friction), in MuJoCo's order."""
+    groups: list[ContactGroup] = []
+    for c in contacts:
+        pos = c.pos[0]
+        for g in groups:
+            if (
+                g.bodies == c.bodies
+                and np.linalg.norm(np.mean(g.pos, axis=0) - pos) <= merge_tol
+                and g.frame[0] @ c.frame[0] >= np.cos(1e-3)
+            ):
+                g.pos.append(pos)
+                g.force_world += c.force_world
+                g.ids.append(c.ids[0])
+                g.mu = min(g.mu, c.mu)
+                break
+        else:
+            groups.append(c)
+    return groups
+
+
 def grasp_from_mujoco(
     model: mujoco.MjModel,
     data: mujoco.MjData,
@@ -335,43 +398,7 @@ def grasp_from_mujoco(
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
-    groups: list[dict[str, Any]] = []
-    for i, _, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
-        con = data.contact[i]
-        if con.dim > 3:
-            raise GraspError(
-                f"contact {i} ({model.geom(con.geom1).name or con.geom1} / "
-                f"{model.geom(con.geom2).name or con.geom2}) has condim {con.dim}: torsional or "
-                "rolling friction is not in the point-contact model; use condim 1 or 3"
-            )
-        frame, force = contact_frame_force(model, data, i, obj_first)
-        hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
-        bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
-        pos = con.pos.copy()
-        mu = 0.0 if con.dim == 1 else float(con.friction[0])
-        for g in groups:
-            if (
-                g["bodies"] == bodies
-                and np.linalg.norm(np.mean(g["pos"], axis=0) - pos) <= merge_tol
-                and g["frame"][0] @ frame[0] >= np.cos(1e-3)
-            ):
-                g["pos"].append(pos)
-                g["force_world"] += frame.T @ force
-                g["ids"].append(i)
-                g["mu"] = min(g["mu"], mu)
-                break
-        else:
-            groups.append(
-                {
-                    "pair": (hand_geom, obj_geom),
-                    "bodies": bodies,
-                    "pos": [pos],
-                    "frame": frame,
-                    "force_world": frame.T @ force,
-                    "mu": mu,
-                    "ids": [i],
-                }
-            )
+    groups = _merge(_read(model, data, in_obj), merge_tol)
     if not groups:
         raise GraspError(
             f"no active contact between body {object_body!r} and the hand "
@@ -382,35 +409,16 @@ def grasp_from_mujoco(
 
     hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
                     stop_gap=stop_gap, spring_held=spring_held,
-                    object_contacts=[i for g in groups for i in g["ids"]])  # fmt: skip
+                    object_contacts=[i for g in groups for i in g.ids])  # fmt: skip
     hand_dofs, T = hm.dofs, hm.T
-    m = len(groups)
-    pts_w = np.array([np.mean(g["pos"], axis=0) for g in groups])
-    frames_w = np.array([g["frame"] for g in groups])  # (m, 3, 3) rows n, t1, t2
-    forces = np.einsum("mkj,mj->mk", frames_w, np.array([g["force_world"] for g in groups]))
-    hand_geoms = np.array([g["pair"][0] for g in groups], dtype=np.int64)
+    pts_w = np.array([np.mean(g.pos, axis=0) for g in groups])
+    frames_w = np.array([g.frame for g in groups])  # (m, 3, 3) rows n, t1, t2
+    forces = np.einsum("mkj,mj->mk", frames_w, np.array([g.force_world for g in groups]))
+    hand_geoms = np.array([g.pair[0] for g in groups], dtype=np.int64)
     hand_bodies = model.geom_bodyid[hand_geoms].astype(np.int64)
     if reduce is not None:  # can the reduced points carry MuJoCo's state?
-        mu = np.array([g["mu"] for g in groups])
-        tang = np.linalg.norm(forces[:, 1:], axis=1)
-        scale = 1e-6 * (1.0 + float(np.abs(forces).max()))
-        bad = np.flatnonzero((forces[:, 0] < -scale) | (tang > mu * forces[:, 0] + scale))
-        for k in bad:
-            warnings.warn(
-                f"grasp_from_mujoco(reduce={reduce!r}): the patch on "
-                f"{model.body(int(hand_bodies[k])).name} needs a force outside the friction "
-                f"cone at a reduced point (c_n {forces[k, 0]:.3g} N, |c_t| {tang[k]:.3g} N, mu "
-                f"{mu[k]:g}): the reduced grasp cannot carry MuJoCo's state (torsion about the "
-                "normal, or a centre of pressure outside the kept points); use more points",
-                HandModelWarning,
-                stacklevel=2,
-            )
-
-    J = np.zeros((3 * m, T.shape[1]))
-    jacp = np.zeros((3, model.nv))
-    for k in range(m):
-        mujoco.mj_jac(model, data, jacp, None, pts_w[k], int(hand_bodies[k]))
-        J[3 * k : 3 * k + 3] = frames_w[k] @ jacp[:, hand_dofs] @ T
+        _warn_outside_cone(model, groups, forces, hand_bodies, reduce)
+    J = _hand_jacobian(model, data, pts_w, frames_w, hand_bodies, hm)
     R = hm.R
 
     pts_o = (pts_w - x_o) @ R_o
@@ -418,7 +426,7 @@ def grasp_from_mujoco(
     grasp = SceneGrasp(
         points=pts_o,
         normals=frames_o[:, 0],
-        mu=[g["mu"] for g in groups],
+        mu=[g.mu for g in groups],
         tangents=frames_o[:, 1:],
         J=J,
         R=R,
@@ -439,33 +447,76 @@ def grasp_from_mujoco(
     grasp.hand_dofs = hand_dofs
     grasp.hand_bodies = hand_bodies
     grasp.hand_geoms = hand_geoms
-    grasp.object_geoms = np.array([g["pair"][1] for g in groups], dtype=np.int64)
-    grasp.contact_ids = [g["ids"] for g in groups]
+    grasp.object_geoms = np.array([g.pair[1] for g in groups], dtype=np.int64)
+    grasp.contact_ids = [g.ids for g in groups]
     grasp.object_pos = x_o
     grasp.object_mat = R_o
-    torque = np.abs(J.T @ forces.reshape(-1))
-    res = np.abs(J.T @ forces.reshape(-1) - R @ hm.forces)
-    grasp.hand_residual = float(res.max(initial=0.0) / max(float(torque.max(initial=0.0)), 1e-9))
     for w in hm.warnings:
         warnings.warn(f"grasp_from_mujoco: not in the grasp model: {w}", HandModelWarning,
                       stacklevel=2)  # fmt: skip
-    if grasp.hand_residual > hand_rtol:
-        k = int(np.argmax(res))
-        raise HandModelError(
-            f"hand equilibrium J^T c = R f does not hold with MuJoCo's forces: residual "
-            f"{res[k]:.3g} at joint {hm.joint_names[k]} ({grasp.hand_residual:.1%} of the "
-            f"largest joint torque {torque.max():.3g}; hand_rtol {hand_rtol:g}). Left out of "
-            f"the model: {'; '.join(hm.warnings) or 'nothing named (is the hand at rest?)'}"
-        )
+    grasp.hand_residual = _hand_residual(J, forces, hm, hand_rtol)
     return grasp
 
 
-def _third_point(p: list[dict[str, Any]], pts: NDArray[np.float64], two: list[int]) -> int:
+def _warn_outside_cone(model: mujoco.MjModel, groups: list[ContactGroup],
+                       forces: NDArray[np.float64], hand_bodies: NDArray[np.int64],
+                       reduce: str) -> None:  # fmt: skip
+    """A :class:`HandModelWarning` for each reduced point whose force (contact frame, [N])
+    is outside its friction cone: the reduced grasp cannot carry MuJoCo's state there."""
+    mu = np.array([g.mu for g in groups])
+    tang = np.linalg.norm(forces[:, 1:], axis=1)
+    scale = 1e-6 * (1.0 + float(np.abs(forces).max()))
+    bad = np.flatnonzero((forces[:, 0] < -scale) | (tang > mu * forces[:, 0] + scale))
+    for k in bad:
+        warnings.warn(
+            f"grasp_from_mujoco(reduce={reduce!r}): the patch on "
+            f"{model.body(int(hand_bodies[k])).name} needs a force outside the friction "
+            f"cone at a reduced point (c_n {forces[k, 0]:.3g} N, |c_t| {tang[k]:.3g} N, mu "
+            f"{mu[k]:g}): the reduced grasp cannot carry MuJoCo's state (torsion about the "
+            "normal, or a centre of pressure outside the kept points); use more points",
+            HandModelWarning,
+            stacklevel=3,
+        )
+
+
+def _hand_jacobian(model: mujoco.MjModel, data: mujoco.MjData, pts_w: NDArray[np.float64],
+                   frames_w: NDArray[np.float64], hand_bodies: NDArray[np.int64],
+                   hm: HandModel) -> NDArray[np.float64]:  # fmt: skip
+    """``J`` (3m x l): each contact's rows (its frame n, t1, t2) of the hand link's point
+    Jacobian at the contact, over the independent joints (``hm.T``)."""
+    J = np.zeros((3 * len(pts_w), hm.T.shape[1]))
+    jacp = np.zeros((3, model.nv))
+    for k in range(len(pts_w)):
+        mujoco.mj_jac(model, data, jacp, None, pts_w[k], int(hand_bodies[k]))
+        J[3 * k : 3 * k + 3] = frames_w[k] @ jacp[:, hm.dofs] @ hm.T
+    return J
+
+
+def _hand_residual(J: NDArray[np.float64], forces: NDArray[np.float64], hm: HandModel,
+                   hand_rtol: float) -> float:  # fmt: skip
+    """``max |J^T c - R f| / max |J^T c|`` with MuJoCo's contact forces ``c`` and the columns'
+    actual forces ``f``; :class:`HandModelError` above ``hand_rtol``, naming the joint and
+    what the model leaves out."""
+    torque = np.abs(J.T @ forces.reshape(-1))
+    res = np.abs(J.T @ forces.reshape(-1) - hm.R @ hm.forces)
+    rel = float(res.max(initial=0.0) / max(float(torque.max(initial=0.0)), 1e-9))
+    if rel > hand_rtol:
+        k = int(np.argmax(res))
+        raise HandModelError(
+            f"hand equilibrium J^T c = R f does not hold with MuJoCo's forces: residual "
+            f"{res[k]:.3g} at joint {hm.joint_names[k]} ({rel:.1%} of the "
+            f"largest joint torque {torque.max():.3g}; hand_rtol {hand_rtol:g}). Left out of "
+            f"the model: {'; '.join(hm.warnings) or 'nothing named (is the hand at rest?)'}"
+        )
+    return rel
+
+
+def _third_point(p: list[ContactGroup], pts: NDArray[np.float64], two: list[int]) -> int:
     """The point whose triangle with ``two`` holds the patch's centre of pressure deepest
     (largest smallest barycentric coordinate, in the patch plane): the kept normal forces
     can then stay >= 0."""
-    frame = p[0]["frame"]
-    fn = np.array([g["force_world"] for g in p]) @ frame[0]
+    frame = p[0].frame
+    fn = np.array([g.force_world for g in p]) @ frame[0]
     cop = (fn @ pts) / fn.sum() if fn.sum() > 0 else pts.mean(axis=0)
     Y, c = pts @ frame[1:].T, cop @ frame[1:].T
     best, best_k = -np.inf, -1
@@ -511,16 +562,16 @@ def _wrench_map(pts: NDArray[np.float64], centre: NDArray[np.float64]) -> NDArra
     )
 
 
-def _line_patch(p: list[dict[str, Any]]) -> list[dict[str, Any]] | None:
+def _line_patch(p: list[ContactGroup]) -> list[ContactGroup] | None:
     """A patch as two contacts on the line through its centre of pressure along its longest
     extent, at the patch's boundary (its points' convex hull), forces carrying the patch's
     whole wrench (exact for coplanar points: about the centre of pressure the normal forces
     have no in-plane moment). None for a patch whose points are collinear or unloaded."""
     from scipy.spatial import ConvexHull, QhullError
 
-    frame = p[0]["frame"]
-    pts = np.array([np.mean(g["pos"], axis=0) for g in p])
-    forces = np.array([g["force_world"] for g in p])
+    frame = p[0].frame
+    pts = np.array([np.mean(g.pos, axis=0) for g in p])
+    forces = np.array([g.force_world for g in p])
     fn = forces @ frame[0]
     if fn.sum() <= 0:
         return None
@@ -548,21 +599,21 @@ def _line_patch(p: list[dict[str, Any]]) -> list[dict[str, Any]] | None:
     A = _wrench_map(ends, centre)
     f0 = np.tile(forces.sum(axis=0) / 2, 2)
     f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
-    ids = [i for g in p for i in g["ids"]]
-    mu = min(g["mu"] for g in p)
-    return [dict(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
-                 force_world=f[3 * k : 3 * k + 3]) for k in range(2)]  # fmt: skip
+    ids = [i for g in p for i in g.ids]
+    mu = min(g.mu for g in p)
+    return [replace(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
+                    force_world=f[3 * k : 3 * k + 3]) for k in range(2)]  # fmt: skip
 
 
-def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, Any]]:
+def _reduce_patches(groups: list[ContactGroup], keep: int) -> list[ContactGroup]:
     """Each patch (same hand and object body, normals within 1e-3 rad) to at most ``keep``
     contacts, farthest first; a dropped contact's force goes to the nearest kept one and
     the kept forces are corrected to carry the patch's wrench. ``keep == 0``: the line
     through the centre of pressure (:func:`_line_patch`)."""
-    patches: list[list[dict[str, Any]]] = []
+    patches: list[list[ContactGroup]] = []
     for g in groups:
         for p in patches:
-            if p[0]["bodies"] == g["bodies"] and p[0]["frame"][0] @ g["frame"][0] >= np.cos(1e-3):
+            if p[0].bodies == g.bodies and p[0].frame[0] @ g.frame[0] >= np.cos(1e-3):
                 p.append(g)
                 break
         else:
@@ -578,7 +629,7 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
         if len(p) <= n_keep:
             out.extend(p)
             continue
-        pts = np.array([np.mean(g["pos"], axis=0) for g in p])
+        pts = np.array([np.mean(g.pos, axis=0) for g in p])
         dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
         i, j = np.unravel_index(np.argmax(dist), dist.shape)
         chosen = [int(i), int(j)]
@@ -588,22 +639,22 @@ def _reduce_patches(groups: list[dict[str, Any]], keep: int) -> list[dict[str, A
             far = dist[:, chosen].min(axis=1)
             far[chosen] = -1.0
             chosen.append(int(np.argmax(far)))
-        kept = [dict(p[k], pos=list(p[k]["pos"]), ids=list(p[k]["ids"]),
-                     force_world=p[k]["force_world"].copy()) for k in chosen]  # fmt: skip
+        kept = [replace(p[k], pos=list(p[k].pos), ids=list(p[k].ids),
+                        force_world=p[k].force_world.copy()) for k in chosen]  # fmt: skip
         for k, g in enumerate(p):
             if k in chosen:
                 continue
             near = kept[int(np.argmin(dist[k, chosen]))]
-            near["force_world"] = near["force_world"] + g["force_world"]
-            near["ids"] = near["ids"] + g["ids"]
-            near["mu"] = min(near["mu"], g["mu"])
+            near.force_world = near.force_world + g.force_world
+            near.ids = near.ids + g.ids
+            near.mu = min(near.mu, g.mu)
         # keep the patch's wrench: f = f0 + A^+ (W - A f0), A the kept points' wrench map
         centre = pts.mean(axis=0)
-        W = _patch_wrench(pts, np.array([g["force_world"] for g in p]), centre)
+        W = _patch_wrench(pts, np.array([g.force_world for g in p]), centre)
         A = _wrench_map(pts[chosen], centre)
-        f0 = np.concatenate([g["force_world"] for g in kept])
+        f0 = np.concatenate([g.force_world for g in kept])
         f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
         for k, g in enumerate(kept):
-            g["force_world"] = f[3 * k : 3 * k + 3]
+            g.force_world = f[3 * k : 3 * k + 3]
         out.extend(kept)
     return out
