@@ -2,9 +2,9 @@
 
 Env steps per second for one process (physics + observation + reward, random
 actions in [-1, 1]^12 from the cached start grasps: the training distribution),
-from the landed model's settings to the shipped env, one change at a time:
+from a baseline (row 1) to the shipped env, one change at a time:
 
-1. ``landed``: the hand model as first landed: 1 ms x 50 substeps, Newton, noslip
+1. ``landed``: the baseline: 1 ms x 50 substeps, Newton, noslip
    pass (20 iterations), impratio 1, palm and floor without collision, no
    finger-finger contacts, observation through ``ihm.grasp_from_mujoco``;
 2. ``+ honest friction``: noslip off, impratio 100 (the grasp holds without noslip);
@@ -12,8 +12,8 @@ from the landed model's settings to the shipped env, one change at a time:
 4. ``+ 2 ms x 25``: the timestep doubled (solref 0.01 s is still 5 timesteps);
 5. ``+ PGS``: the same contact problem solved by PGS instead of Newton;
 6. ``+ fast observation``: the env's own contact path;
-7. ``+ torsional friction``: ``condim`` 4 (what the task needs: without it PPO learned to
-   spin the sphere freely between two antipodal point contacts). ``grasp_from_mujoco``
+7. ``+ torsional friction``: ``condim`` 4 (what the task needs: without it a sphere pinched
+   between two antipodal point contacts spins freely). ``grasp_from_mujoco``
    refuses ``condim`` 4, so this comes after the observation row;
 8. ``+ solver tolerance 1e-4``: PGS stops at 1e-4 instead of MuJoCo's 1e-8 (what the policy
    sees does not change: ``python -m train.bench fidelity``);
@@ -28,8 +28,8 @@ scripted turn (abduction setpoints +0.05 rad for 6 steps, then 6 steps of zero
 action) from 8 cached grasps, the object's yaw and position at the end with
 those of row 2's physics (median over the grasps).
 
-The policy-based parts that this command used to run moved under ``train`` (they load a
-trained policy or train one, and nothing below ``train`` imports it): PPO training
+The policy-based benchmarks are under ``train`` (they load a trained policy or train one,
+and nothing below ``train`` imports it): PPO training
 throughput is ``python -m train.bench training`` (four_finger_training.csv), the fidelity
 table ``python -m train.bench fidelity`` (four_finger_fidelity.csv), the timestep transfer
 ``python -m train.bench transfer`` (four_finger_transfer.csv); ``--train``, ``--fidelity``
@@ -65,7 +65,7 @@ THESIS_STEPS_PER_S = 15_360_000 / (9 * 3600)  # 474: thesis sec. 7.1.2, 15.36M s
 
 
 def _slow_observe(env: FourFingerRotate) -> Callable[[], np.ndarray]:
-    """The observation through ihm.grasp_from_mujoco (what was available before the env)."""
+    """The observation through ihm.grasp_from_mujoco (rows 1-5; the env's own path after)."""
     m, d = env.model, env.data
 
     def observe() -> np.ndarray:
@@ -106,7 +106,7 @@ def make(level: int) -> FourFingerRotate:
         env.frame_skip = 50
     if level <= 2:
         for g in range(m.ngeom):
-            if m.geom_contype[g] == 2:  # finger capsules: objects only, as landed
+            if m.geom_contype[g] == 2:  # finger capsules: objects only (rows 1-2)
                 m.geom_contype[g], m.geom_conaffinity[g] = 0, 1
             elif m.geom(g).name in ("palm", "floor"):
                 m.geom_contype[g] = m.geom_conaffinity[g] = 0
@@ -167,7 +167,7 @@ def scripted_turn(level: int, grasps: Sequence[int] = range(8)) -> np.ndarray:
     return np.array(res)
 
 
-MOVED = {  # option: the command that runs it now
+MOVED = {  # option: the train.bench command that runs that part
     "train": "python -m train.bench training",
     "fidelity": "python -m train.bench fidelity",
     "transfer": "python -m train.bench transfer",
@@ -180,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     p.add_argument("--steps", type=int, default=600, help="env steps per repeat")
     p.add_argument("--repeats", type=int, default=5, help="repeats per row (median reported)")
     p.add_argument("--out", default="bench_out", help="directory for the CSV and PNG")
-    # the options of the parts that moved under train: --no-X is accepted, --X names the move
+    # the options of the parts train.bench runs: --no-X is accepted, --X exits naming the command
     p.add_argument("--env", action=argparse.BooleanOptionalAction, default=True,
                    help=argparse.SUPPRESS)  # fmt: skip
     for name in ("train", "fidelity", "transfer"):
@@ -191,7 +191,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     moved = [cmd for name, cmd in MOVED.items() if getattr(a, name) not in (False, None)]
     if moved:
         p.error(f"moved under train (run {'; '.join(moved)})")
-    if not a.env:  # what --no-env used to leave, the training-based parts, moved
+    if not a.env:  # --no-env skips the env rows, the only ones this command runs
         p.error("--no-env leaves nothing to run here: the training and policy benchmarks are "
                 "python -m train.bench training|fidelity|transfer")  # fmt: skip
     out = Path(a.out)

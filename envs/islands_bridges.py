@@ -190,7 +190,7 @@ class IslandsBridges(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     - ``ihm/IslandsBridges-v0``: initial version (thesis chapter 7), the five-island map with
       the dead-end island I4 reached by the spur B4 (``SPUR_ISLANDS``, ``SPUR_BRIDGES``), the
-      first shipped map. For one release this id pointed at the ring by mistake.
+      first shipped map.
     - ``ihm/IslandsBridgesRing-v0``: the four-island ring (``RING_ISLANDS``,
       ``RING_BRIDGES``), a map of its own (not a newer version of v0, so it has its own name
       rather than ``-v1``, which Gymnasium would treat as superseding v0); dynamics, rewards

@@ -50,8 +50,8 @@ Compliance
   The torsional row creeps the same way: ``R_tau h / B`` [rad/(N m)] (0.43 here). Leaving
   it out (a point contact) doubles the prediction error on the four-finger grasps: the
   fingertip's twist about the contact normal is the abduction joint's rotation, and the
-  torsional friction couples it to the object. Of the horizons tried (0.0125 to 0.1 s),
-  the policy period ``h = 0.05 s`` predicts MuJoCo's step best.
+  torsional friction couples it to the object. Among horizons from 0.0125 to 0.1 s, the
+  policy period ``h = 0.05 s`` predicts MuJoCo's step best.
 
 Object motion and contact forces (Bicchi)
 -----------------------------------------

@@ -203,8 +203,8 @@ class RolloutThreads(BaseCallback):
     """Torch on one thread while collecting rollouts, ``threads`` for the update.
 
     With worker processes stepping the envs, two torch threads in the training process
-    spin between the small forward passes and take the workers' cores (measured: 2 workers
-    became slower than none)."""
+    spin between the small forward passes and take the workers' cores (with them, 2 workers
+    are slower than none)."""
 
     def __init__(self, threads: int) -> None:
         super().__init__()

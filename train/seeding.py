@@ -5,8 +5,8 @@ consumer of randomness gets its own child of that root, addressed by a fixed pat
 spawn keys, so that
 
 - two run seeds share no stream: ``SeedSequence`` hashes the whole path, so run 1's
-  training env 3 and run 2's training env 2 are unrelated (with the former scheme,
-  ``seed + i``, seeds 1, 2 and 3 shared 7 of their 8 reset streams);
+  training env 3 and run 2's training env 2 are unrelated (with consecutive seeds
+  ``seed + i`` instead, seeds 1, 2 and 3 would share 7 of their 8 reset streams);
 - the streams of one run do not overlap each other either: training, validation and
   test environments, and the global generators, each have their own subtree;
 - the same seed gives the same streams on every machine.

@@ -1,7 +1,7 @@
 """A vectorised env that steps its envs in a few worker processes, each its share in turn.
 
 SB3's ``SubprocVecEnv`` runs one process per env: with 16 envs on a 2-core machine
-that is 16 pipe round trips and context switches per step, and it measured no
+that is 16 pipe round trips and context switches per step, and it is no
 faster than stepping all envs in the training process (``DummyVecEnv``).
 :class:`ChunkedVecEnv` runs ``n_workers`` processes (one per core), each holding a
 ``DummyVecEnv`` over a contiguous chunk of the envs: one round trip per worker

@@ -116,9 +116,8 @@ def generate_grasps(
        steps with the setpoints fixed (zero actions): not dropped, moved less
        than 5 mm and turned less than 0.1 rad, at least two fingers touching, and the
        object's centre at least :data:`START_CLEARANCE` (10 mm) above ``DROP_Z`` at the
-       start. Without that last condition 4 of the cube's 100 firm test grasps (1 of the
-       cylinder's) started 0.6-1.9 mm above the drop threshold, the object low and tilted in
-       the hand, and any motion of it ended the episode as a drop within 2-9 steps.
+       start. That last condition keeps out grasps that hold the object low and tilted just
+       above the drop threshold, where any motion of it ends the episode as a drop.
 
     ``grip="firm"`` adds, before step 4, to each touching finger's setpoints
     ``q_c += J_c^T f_c / kp`` with ``f_c = FIRM_SQUEEZE * h_c + (FIRM_LIFT * m g / n) e_z``:
@@ -278,7 +277,7 @@ def _cache_key(
         h.update(Path(path).read_bytes())
     settings = (gravity, n, seed, timestep, frame_skip, "pgs", SOLVER_TOLERANCE, "condim4")
     settings += (mujoco.__version__,)
-    if grip != "nominal":  # the nominal grip's keys (and caches) predate the option
+    if grip != "nominal":  # nominal: no grip fields in the key, so nominal caches stay valid
         settings += (grip, FIRM_LIFT, FIRM_SQUEEZE, worst_hold())
     h.update(repr(settings).encode())
     h.update(repr(_GENERATOR_VERSION).encode())

@@ -69,10 +69,10 @@ state (the observation is not Markov).
 - ``action``: ``-action_weight * |a|^2 / 12`` (default 0);
 - ``height``: ``-height_weight * max(0, HOLD_Z - z) / (HOLD_Z - DROP_Z)``, the object's sag
   below ``HOLD_Z`` (0.07 m; the start grasps hold it at about 0.077 m) as a fraction of the way
-  to the drop threshold ``DROP_Z`` (default weight 0). Without it, trained policies carried
-  the sphere in a low two-finger pinch 2-10 mm above the drop threshold, where a small sag
-  ends the episode (docs/four_finger.md). With ``height_from="start"`` the reference is the
-  object's height at the episode's start, ``z_0``, instead of ``HOLD_Z``:
+  to the drop threshold ``DROP_Z`` (default weight 0). It penalises holding the object low,
+  just above the drop threshold, where a small sag ends the episode (docs/four_finger.md).
+  With ``height_from="start"`` the reference is the object's height at the episode's start,
+  ``z_0``, instead of ``HOLD_Z``:
   ``-height_weight * max(0, z_0 - z) / (z_0 - DROP_Z)``, so every millimetre of sag counts
   (with ``HOLD_Z`` the first 7 mm cost nothing: a slow sag of 1-2 mm/s gives no signal
   inside a 3.2 s training episode);
@@ -81,8 +81,8 @@ state (the observation is not Markov).
   a sliding contact's friction acts along the slip, so it holds less against the weight;
 - ``tilt``: ``-tilt_weight * tilt``, the object's tilt since the episode's start [rad]
   (:func:`z_tilt`: the angle by which its rotation since then turns the vertical; default
-  weight 0). Trained without it, cylinder policies tipped the upright cylinder over (60-100
-  degrees within 7-18 s) at slightly higher friction and lost it (docs/four_finger.md).
+  weight 0). It penalises tipping over an upright object such as the cylinder
+  (docs/four_finger.md).
 
 ## Episode End
 
@@ -272,7 +272,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m x the normal force,
         that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis' point
         contact), a sphere pinched between two antipodal points spins freely about the
-        line through them, and PPO learned exactly that (docs/four_finger.md).
+        line through them, which nothing resists (docs/four_finger.md).
     solver : MuJoCo constraint solver, ``"pgs"`` (default) or ``"newton"`` (the hand
         model's). Both solve the same convex contact problem; PGS is 5x cheaper on it.
 

@@ -5,8 +5,8 @@ setting of :data:`FIDELITY` (timestep, substeps, solver, tolerance), compared wi
 converged reference (0.5 ms x 100, Newton to 1e-12): the reward (the object's yaw rate),
 the object's position and the observed link normal forces (:func:`timestep_fidelity`;
 :func:`envs.four_finger.policy_step_outcomes`). Writes ``--out``/four_finger_fidelity.csv
-(moved from ``python -m envs.bench --fidelity``: it loads a trained policy, which lives in
-``train``).
+(it loads a trained policy, which lives in ``train``; ``python -m envs.bench --fidelity``
+names this command).
 """
 
 from __future__ import annotations

@@ -22,13 +22,12 @@ contact) and ``mu_j = contact.friction[j - 1]``, ``sqrt(sum_j (f_j / mu_j)^2) / 
 mjCNSTRSTATE_CONE`` is not used: the constant exists in MuJoCo 4.0, but with the env's PGS
 (dual) solver ``efc_state`` is set by ``dualState`` (``src/engine/engine_solver.c``), which
 labels a force exactly on the cone surface (PGS projects a sliding contact's friction onto
-the ellipsoid: the ratio is 1 to 1e-9) ``CONE`` or ``SATISFIED`` depending on round-off: in
-the default run only 10-13 % of the finger contacts with a ratio >= 0.99 were labelled
-``CONE``. The per-episode CSV reports both counts (``slip_contacts``,
-``slip_contacts_cone_state``). "End of a step" is the contact data the env leaves after the
-step (the last substep's collision detection, as in the observation). *Contact loss*: a
-finger link that touched the object at the start of a step and does not at its end
-(counted per link).
+the ellipsoid: the ratio is 1 to 1e-9) ``CONE`` or ``SATISFIED`` depending on round-off, so
+a sliding contact may carry either label. The per-episode CSV reports both counts
+(``slip_contacts``, ``slip_contacts_cone_state``). "End of a step" is the contact data the
+env leaves after the step (the last substep's collision detection, as in the observation).
+*Contact loss*: a finger link that touched the object at the start of a step and does not at
+its end (counted per link).
 """
 
 from __future__ import annotations

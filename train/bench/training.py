@@ -8,8 +8,8 @@ env steps/s (15.36M steps in about 9 h). The three setups take turns rollout by 
 one process (``--rollouts`` each); the ratio column is the median of the per-turn ratios to
 the in-process setup (:func:`train_steps_per_second`).
 
-Writes ``--out``/four_finger_training.csv. (These rows were part of ``python -m envs.bench``
-and its four_finger_env.csv, whose env-only rows stay there: training lives in ``train``.)
+Writes ``--out``/four_finger_training.csv. (The env-only rows are ``python -m envs.bench``'s
+four_finger_env.csv: training lives in ``train``.)
 """
 
 from __future__ import annotations

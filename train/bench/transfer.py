@@ -4,8 +4,8 @@ Evaluates the shipped policy (trained at 2 ms) and one trained at 2.5 ms
 (``policies/four_finger_sphere_2.5ms``, ``python -m train.ppo --timestep 0.0025``, same
 seed and budget) under 1, 2 and 2.5 ms physics, from the same start grasps
 (:func:`timestep_transfer`, :func:`train.policy.evaluate`). Writes
-``--out``/four_finger_transfer.csv (moved from ``python -m envs.bench --transfer``; about
-10 min with the defaults).
+``--out``/four_finger_transfer.csv (about 10 min with the defaults; ``python -m envs.bench
+--transfer`` names this command).
 """
 
 from __future__ import annotations
