@@ -11,9 +11,9 @@ the model's own, never changed here, and are stated in :attr:`Resistance.conditi
 Creep and breakaway. MuJoCo's friction is a soft constraint: a held object creeps at a
 speed roughly proportional to the tangential load (set by ``impratio``, the contact
 ``solref`` and the noslip pass), so its displacement over a ramp grows like
-``s**2 / rate``. A threshold on the displacement alone (the old rule: the load at 2 mm)
-therefore measures creep, and moves 3-5x with ``impratio`` and the ramp rate where the
-creep is fast. A real slip is different: the contacts stop holding and the object's
+``s**2 / rate``. A threshold on the displacement alone (``stop_rule="distance"``: the load
+at 2 mm) therefore measures creep, and moves 3-5x with ``impratio`` and the ramp rate where
+the creep is fast. A real slip is different: the contacts stop holding and the object's
 speed jumps by orders of magnitude within milliseconds. The *slip rule* looks for that
 jump:
 
@@ -43,9 +43,9 @@ that state with its stops as they were) at ``rate / RATE_CHECK_FACTOR`` (4x slow
 issues a :class:`RateDependenceWarning` when the two answers differ by more than
 ``rate_tol`` (20 %) of ``value``; both are kept in :attr:`Resistance.rate_check`.
 
-Measured (tests/ihm/test_resistance.py): the analytic pinch's ``2 mu tau / L`` =
-2.2222 N comes out 2.225 N at impratio 100 and 2.23-2.25 N at impratio 10, at 1 and 0.25
-N/s (the old 2 mm rule: 2.26-2.33 N).
+On the analytic pinch (tests/ihm/test_resistance.py) the slip rule's breakaway stays within
+1.2 % of ``2 mu tau / L`` = 2.2222 N at impratio 100 and 10, at 1 and 0.25 N/s, where the
+distance rule's load at 2 mm comes 1.5-5 % late.
 
 A new contact also ends the run (``stop_on_new_contact``, default on): when the object
 touches a body it did not touch at rest (the palm, a finger that was open), the grasp the
@@ -177,11 +177,11 @@ def simulated_resistance(
     check_rate : repeat the ramp :data:`RATE_CHECK_FACTOR` times slower from a copy of the
         state and warn (:class:`RateDependenceWarning`) if the answers differ by more than
         ``rate_tol`` (relative to ``value``). Costs up to 4x the ramp's time again.
-    stop_rule : ``"slip"`` (default: the slip rule, module doc) or ``"distance"`` (the
-        rule before it: ``value`` is the largest load held before the object moved
-        ``max_shift`` or turned ``max_turn``, creep included; the thesis experiments in
-        :mod:`ihm.experiments` that predate the slip rule keep it, so that their
-        documented figures stay reproducible).
+    stop_rule : ``"slip"`` (default: the slip rule, module doc) or ``"distance"``
+        (``value`` is the largest load held before the object moved ``max_shift`` or
+        turned ``max_turn``, creep included; the thesis experiments in
+        :mod:`ihm.experiments` and the simulated maps of :mod:`ihm.sim_maps` use it, so
+        that their documented figures stay reproducible).
     """
     w = np.asarray(direction, dtype=float).reshape(-1)
     if w.shape != (6,) or not np.isfinite(w).all():

@@ -157,8 +157,7 @@ def _answer_or_error(sol: Solution) -> Solution:
     stable answer of an optimisation query (MaxDisturbance, OptimalCommands) has a finite
     ``value``. Anything else is turned into ``status="error"`` (``stable=None``,
     ``stats["message"]`` says what was missing), never passed on as an answer; the
-    method's point, if any, is kept for inspection. (``iterative`` once answered
-    ``"solved"`` with ``value=None``.)"""
+    method's point, if any, is kept for inspection."""
     if sol.status != "solved":
         return sol
     problem = None

@@ -459,8 +459,8 @@ def _scip(ex: CoulombModel, opts: MipOptions, time_limit: float | None, feastol:
         m, x = ex.scip_model(time_limit, opts.verbose, feastol, gap)
         m.setParam("limits/absgap", 1e-9)  # gap is relative: small answers need it so
         if not ex.prob.model.presolve:
-            # without presolve SCIP's symmetry detection never returned on the pinch's
-            # Existence(-2.5 z, commands 0.1) (killed after 600 s; time limit ignored)
+            # without presolve SCIP's symmetry detection can run on past the time limit
+            # (the pinch's Existence(-2.5 z, commands 0.1)): off
             m.setParam("misc/usesymmetry", 0)
         raw = optimize_scip(m, x, ex.prob.model, t0)
     except Exception as e:  # noqa: BLE001  (a solver's internal failure is a status)

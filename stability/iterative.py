@@ -23,12 +23,8 @@ the object at its commanded forces so the net wrench is the same all along the r
 least-motion optimum is then no step at all (step 0, "converged") while an equilibrium lies
 beyond ``gamma`` times the small net wrench. One step with the ray as long as a contact can
 move in the model (``2 B``) decides: a lower net wrench there and the loop goes on from it,
-else "unstable". Measured on 75 random 3-contact MaxDisturbance queries
-(``random_fingers``, seeds 100-102, balanced commands scaled by U(0.5, 1.5), cap 100): 12
-commanded preloads stalled so (e.g. a net wrench of 0.0102 N, flat for steps 0 to 100,
-balanced at a step of 180, the object moved by 1.8; ``exact`` holds those commands), and
-each query was answered "unstable" (status ``"solved"``, ``value=None``, 0.03 s); with
-the look all 75 are answered stable but one that hits the iteration cap.
+else "unstable". Commanded preloads of random grasps stall on such plateaus, so without the
+look their queries would be answered "unstable" where ``exact`` holds the commands.
 
 Commands are applied first: the scheme runs with ``w = 0`` from ``r = 0`` to the commanded
 preload's state ``(r_pre, q_pre)`` (``stats["preload_trace"]``), then with the disturbance
@@ -42,11 +38,10 @@ decade search down from it, then bisection until ``hi - lo <= rtol * hi + atol``
 found (a lower bound within that tolerance of the stability boundary of the scheme).
 When the commanded preload alone is not stable for the scheme, a MaxDisturbance has no
 answer (status ``"not_converged"``, ``stats["message"]``): the disturbance is applied from
-the preload's state, and the stable set along the ray need not contain ``s = 0`` (with
-commands drawn U(0.02, 0.2), 6 of 75 such queries; on one, ``exact`` holds the cap of 100
-where ``s = 0`` is unstable, on two others ``exact`` holds ``s = 0`` itself). It used to
-answer "unstable" (status ``"solved"``, ``value=None``) from the preload alone. An
-``Existence`` query still answers "unstable" there (the scheme's own answer).
+the preload's state, and the stable set along the ray need not contain ``s = 0`` (``exact``
+can hold the cap where ``s = 0`` is unstable), nor does the scheme's stop prove ``s = 0``
+unstable, so "unstable" for every ``s`` would be a guess. An ``Existence`` query answers
+"unstable" there (the scheme's own answer).
 
 Units and the metric ``M``: springs have unit stiffness, so motion is measured in newtons.
 The thesis moves the object along ``w^{k-1}`` itself, which mixes N and N m; here the
@@ -251,7 +246,7 @@ def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options:
                 # state, and the stable set along the ray need not contain s = 0 (an
                 # unbalanced command can be held by a disturbance against it); nor does the
                 # scheme's stop prove s = 0 unstable. So no answer, rather than "unstable"
-                # for every s in [0, cap] (was: status "solved", value None, in 0.03 s).
+                # for every s in [0, cap].
                 stats["reason"] += (
                     "; the scheme starts the disturbance from the commands' "
                     "equilibrium, so it cannot answer this MaxDisturbance"

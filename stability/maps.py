@@ -206,8 +206,8 @@ def bench(
     Per preload (0 and 1 N per contact): ``batched_cold_ms``, the map on a fresh
     :class:`Grasp` (state enumeration and factorisation included, as on a first call);
     ``batched_warm_ms``, a second map on the same grasp (cached states); ``loop_ms``,
-    ``directions`` calls of ``solve(..., method="planar")`` on a fresh grasp (what
-    ``resistible_forces`` did before the batch). Medians over ``repeats`` (batched) and
+    ``directions`` calls of ``solve(..., method="planar")`` on a fresh grasp (one solve per
+    direction, as the other methods' maps run). Medians over ``repeats`` (batched) and
     ``loop_repeats`` (loop) runs, interleaved so that machine noise hits all alike;
     ``max_rel_diff``: the largest difference of the two maps relative to ``max(1, value)``.
     """

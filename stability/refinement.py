@@ -380,9 +380,8 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                 # the model's bounds (big-M), to this level's bound
                 data.cap = min(data.cap, relaxed * (1 + 1e-6) + 1e-12 * cap0)
                 # (the box, from the force scale at the cap, shrinks with it: a box kept at
-                # the first cap's scale let the relaxation gain 7e-4 on grasp (a)'s first
-                # direction through slides of 1e5 misaligned by 0.2 deg, and no exact point
-                # found any of it)
+                # the first cap's scale lets the relaxation gain through large, slightly
+                # misaligned slides that no exact point reaches)
                 bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand,
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
@@ -477,10 +476,9 @@ def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float 
     lower = s``, ``upper`` the relaxation's bound, certified when ``s`` is within
     ``certify_gap`` of it. None when no probe holds within the time left.
 
-    Measured on the grasps benchmark (``python -m stability.bench grasps``): grasp (b),
-    direction 7, bound at the cap 100: the rounds' modes gave no exact point, Existence
-    at 100 is stable (0.24 s); grasp (h), direction 9, bound 0.5562691: Existence at the
-    bound less 5e-5 gave none (3.6 s), less 1e-3 is stable (0.7 s)."""
+    An Existence query is solved by rounds of its own, whose modes can admit an exact point
+    at or just below the bound where the MaxDisturbance rounds' modes admit none; a larger
+    back-off can find one where a smaller does not."""
     if relaxed is None:
         return None
     base = np.zeros_like(data.direction) if data.base is None else data.base

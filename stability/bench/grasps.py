@@ -281,7 +281,7 @@ def read_baseline(out: Path, rev: str) -> list[dict[str, Any]]:
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
     """The rows of a ``grasps.csv`` this benchmark wrote (``--merge``), typed as written; a
-    file from before the ``k`` column gets it from the rows' order (the benchmark's)."""
+    file without the ``k`` column gets it from the rows' order (the benchmark's)."""
 
     def num(v: str) -> float | None:
         return None if v in ("", "None") else float(v)

@@ -144,8 +144,8 @@ COLORS = {"planar": "C2", "gws": "C7", "no_mdp": "C3", "iterative": "C4",
 
 
 def read_tradeoff(path: Path) -> list[dict[str, Any]]:
-    """Rows of a ``tradeoff.csv`` (numbers parsed; empty fields None; the reference's old
-    label ``spatial``, from before the method was renamed, read as ``exact``)."""
+    """Rows of a ``tradeoff.csv`` (numbers parsed; empty fields None; the reference's label
+    ``spatial``, the alias of ``exact``, read as ``exact``)."""
     rows = []
     with Path(path).open() as fh:
         for r in csv.DictReader(fh):

@@ -29,17 +29,14 @@ THREADS = 1  # small models solved many times: more threads cost more than they 
 LICENCE_LIMIT = (2000, 2000)  # variables, constraints of gurobipy's size-limited licence
 _LICENCE_ERROR = 10010  # GRB_ERROR_SIZE_LIMIT_EXCEEDED
 
-# Every model's settings (on the shared environment), measured on 73 refinement MIPs (the
-# rounds of MaxDisturbance queries on bench grasps "a" and "e", three directions each, as
-# SCIP met them, and the first direction's as Gurobi did; SCIP's answers as reference).
-# IntFeasTol: Gurobi's default 1e-5 lets a binary sit 1e-5 off its value, which where Gurobi
-# makes big-M rows of an indicator or SOS (bounds up to 3e4 here) is a "trickle"
-# past the condition: the defaults gave 3 answers that fail the exact conditions (indicators
-# violated by up to 5e-4) and 3 "optimal" ones above SCIP's optimum (up to 8e-6 relative);
-# IntFeasTol 1e-9 (Gurobi's least) gave none. PreSOS1BigM and PreSOS2BigM 0 keep indicators
-# and SOS2 native (no big-M in presolve): the same answers, 1051 -> 229 ms per MIP (mean; on
-# their own, with IntFeasTol at 1e-5, still 3 wrong answers). FeasibilityTol stays at its
-# default 1e-6 (1e-9 changed no answer).
+# Every model's settings (on the shared environment), checked on refinement's MIPs against
+# SCIP's answers. IntFeasTol: Gurobi's default 1e-5 lets a binary sit 1e-5 off its value,
+# which where Gurobi makes big-M rows of an indicator or SOS (bounds up to 3e4 in refinement)
+# is a "trickle" past the condition: answers that fail the exact conditions, and "optimal"
+# ones above the optimum; IntFeasTol 1e-9 (Gurobi's least) gives none there. PreSOS1BigM and
+# PreSOS2BigM 0 keep indicators and SOS2 native (no big-M in presolve): the same answers,
+# several times faster (on their own, with IntFeasTol at 1e-5, they leave the wrong
+# answers). FeasibilityTol stays at its default 1e-6 (1e-9 changes no answer).
 SETTINGS: dict[str, float] = {"Threads": THREADS, "IntFeasTol": 1e-9, "PreSOS1BigM": 0,
                               "PreSOS2BigM": 0}  # fmt: skip
 
@@ -178,9 +175,8 @@ def _build(
     gap: float,
 ) -> Any:
     """Settings and contents of the empty ``gurobipy.Model`` ``m``; the ``MVar`` of
-    ``model``'s variables. Rows go in as one sparse matrix (``addMConstr``): measured on the
-    73 refinement MIPs of :data:`SETTINGS` (76 to 333 variables), 0.60 ms per build (median)
-    against 0.72 ms with one ``addLConstr`` per row (SCIP's build: 2.9 ms, HiGHS': 3.2 ms)."""
+    ``model``'s variables. Rows go in as one sparse matrix (``addMConstr``), faster than one
+    ``addLConstr`` per row."""
     import gurobipy as gp
     from gurobipy import GRB
 
@@ -192,8 +188,8 @@ def _build(
     m.Params.MIPGapAbs = min(float(gap), 1e-9)  # the gap is relative; tiny values
     if model.many_small:
         # one of many small MIPs (a refinement round), as for SCIP (stability.mip._scip):
-        # cutting planes and primal heuristics cost more than they save. Measured on the 73
-        # refinement MIPs of SETTINGS: 229 -> 110 ms per MIP (mean), the same answers.
+        # cutting planes and primal heuristics cost more than they save, with the same
+        # answers.
         m.Params.Heuristics = 0
         m.Params.Cuts = 0
     if not model.presolve:

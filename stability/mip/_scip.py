@@ -50,29 +50,22 @@ def build_scip(
     m.setParam("limits/gap", float(gap))
     m.setParam("limits/absgap", min(float(gap), 1e-9))  # the gap is relative; tiny values
     # SCIP's presolve otherwise drops indicator couplings with big coefficients and can
-    # answer "optimal" with a wrong value once the model's bounds reach ~1e4 (measured:
-    # the pinch pushed into a finger with cap 2000 gave 0 instead of the cap)
+    # answer "optimal" with a wrong value once the model's bounds reach ~1e4
     m.setParam("constraints/indicator/maxcouplingvalue", 1e9)
     if model.many_small:
         # one of many small MIPs (a refinement round): cutting planes and primal heuristics
-        # cost more than they save. Measured on the bench grasps' 3-contact queries
-        # (python -m stability.bench grasps): 18.4 s -> 7.2 s for six queries, the same
-        # answers (SCIP's EASYCIP emphasis: 14.8 s); 4-contact checks 4.7 -> 1.2 s and
-        # 11.1 -> 3.1 s. Not for iterative, whose scheme follows the MIPs' particular
-        # optimal vertices and stopped converging on the wedge with it. (A wrong optimum once
-        # seen with it on the Barrett box came from 4e-10 N of round-off in the load, which
-        # SCIP's conflict analysis used exactly; its search order only reached that node
-        # first: stability.model.problem.clean_wrench, tests/stability/test_solver_regressions.py.)
+        # cost more than they save, with the same answers. Not for iterative, whose scheme
+        # follows the MIPs' particular optimal vertices and does not converge on the wedge
+        # with it. (Round-off in the load can decide such a search's answer: it is zeroed
+        # first, stability.model.problem.clean_wrench, tests/stability/test_solver_regressions.py.)
         import pyscipopt as scip
 
         m.setSeparating(scip.SCIP_PARAMSETTING.OFF)
         m.setHeuristics(scip.SCIP_PARAMSETTING.OFF)
-        # no dual reductions: with them SCIP's presolve proved a wrong optimum on a round
-        # (bench grasp (k), max disturbance 1, the third round: "optimal" 10.011 with dual
-        # bound 10.011, where the same MIP has a point at s = 100 with every row within
-        # 1e-13; without them, or without presolve, 100; Gurobi 100). They cost 1.3-1.6x
-        # on grasp (f)'s first two max disturbances (the same brackets);
-        # tests/stability/test_solver_regressions.py
+        # no dual reductions: with them SCIP's presolve can prove a wrong optimum on a
+        # round, a dual bound below a point the same MIP has
+        # (tests/stability/test_solver_regressions.py); without them a round takes somewhat
+        # longer, for the same brackets
         m.setParam("misc/allowstrongdualreds", False)
         m.setParam("misc/allowweakdualreds", False)
     if not model.presolve:
@@ -119,11 +112,9 @@ def build_scip(
 
 
 # SOS2 sets as the logarithmic encoding (binaries and rows) rather than SCIP's SOS2
-# constraint handler. Measured on the rounds of a 4-contact max disturbance (bench grasp (f),
-# its first direction; the same optimum every time): round 3, 28,850 nodes and 8.7 s with
-# native SOS2, 3,185 nodes and 1.9 s encoded (segment binaries: 4,807, 3.0 s); round 4,
-# a time-out at 60 s (229,451 nodes) native, 3,936 nodes and 1.9 s encoded. Gurobi is
-# faster with its own SOS2 (2.3 s against 5.3 s encoded), so only SCIP encodes.
+# constraint handler: SCIP's search needs far fewer nodes on the encoding (and fewer than
+# with one binary per segment), for the same optimum. Gurobi is faster with its own SOS2,
+# so only SCIP encodes.
 LOG_SOS2 = True
 
 

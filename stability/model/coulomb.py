@@ -53,7 +53,7 @@ class CoulombModel:
     friction polygon) plus the tangential motions ``d_t`` (``self.dt``, (m, 2)) and slide
     bounds ``s`` (``self.slide``) as linear variables; the nonlinear rows (circular cone,
     ``|d_t| <= s``, ``c_t . d_t + mu c_n s <= 0``) are added on SCIP's model by
-    :meth:`scip_model`. Formerly ``ExactMdp`` (MDP: the maximum dissipation principle)."""
+    :meth:`scip_model`."""
 
     def __init__(self, grasp: Grasp, data: QueryData, bounds: Any, eta: float,
                  motion_bound: float) -> None:  # fmt: skip
@@ -278,17 +278,14 @@ def slide_search(
     ``source``: where a sliding contact's first slide angle comes from, its motion ``d_t``
     (``"motion"``) or its friction, ``-c_t`` (``"force"``). A relaxation's motion and
     friction share a sector but can differ within it, and only one of them may admit an
-    exact point with the other contacts' modes: on the MuJoCo Barrett cube (push along +z,
-    thumb unloaded) a finest-level answer's slide 0.0025 rad off its friction (within one
-    sector of 2 pi / 2048) gives an infeasible mode LP, its friction's angle 1.7862702
-    within 7e-6 of the bound.
+    exact point with the other contacts' modes (the MuJoCo Barrett cube pushed along +z with
+    the thumb unloaded: a finest-level answer's slide gives an infeasible mode LP, its
+    friction's angle an exact point; tests/stability/test_refinement.py).
 
     ``promote``: a contact that sticks in ``x`` with friction within :data:`PROMOTE_RTOL`
     of the cone's boundary slides instead, at the angle of ``-c_t`` (``sigma_i >= 0``: it
     may still stick, with friction on the boundary). A relaxation's answer can stick a
-    contact that the exact optimum slides by a little: on the MuJoCo Barrett cube above
-    the finest relaxation sticks a contact at the cone's edge that ``exact``'s point
-    (1.786266) slides.
+    contact at the cone's edge that the exact optimum slides by a little.
 
     Modes from ``x`` (binaries fixed): a contact without normal force is open (``c = 0``),
     one whose tangential motion ``d_t`` is nonzero slides at angle ``phi_i`` (``d_t =

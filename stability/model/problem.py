@@ -180,9 +180,9 @@ def clean_wrench(
     only through friction whose torque the nonbackdrivable spread joint must hold, which it
     can for one sign only, so the exact problem flips from stable to unstable at zero load.
     The solvers accept that 4e-10 N residual as zero (feasibility tolerance 1e-6), but
-    SCIP's infeasibility proofs use it exactly (a Farkas proof of a refinement round
-    multiplied it by 1.8e4 into a bound of 7.7e-6 N on a friction force, cutting off the
-    optimum; ``exact`` proved the grasp unstable); zeroed, every method agrees."""
+    SCIP's infeasibility proofs use it exactly: a Farkas proof can scale it into a bound on
+    a friction force that cuts off the optimum (tests/stability/test_solver_regressions.py);
+    zeroed, it cannot."""
     k = 2 if planar else 3
     mag = np.abs(np.asarray(w, dtype=float))
     mag = np.r_[mag[:k], mag[k:] / length]

@@ -26,9 +26,9 @@ HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
 CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS)
 
 
-# Measured by ``python -m stability.bench mip`` (docs/bench/stability.md): over its 12
-# (case, query) medians SCIP/HiGHS is 1.17 (geometric mean) for no_mdp's one MIP per query
-# and 0.84 for iterative's many small ones; both gave the same answers.
+# The faster backend per method in ``python -m stability.bench mip`` (docs/bench/stability.md):
+# HiGHS for no_mdp's one MIP per query, SCIP for iterative's many small ones; both backends
+# give the same answers.
 DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip", "refinement": "scip"}
 
 
@@ -109,9 +109,8 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
                     gap=gap)  # fmt: skip
     _count(res, stats)
     if opts.backend == "scip" and res.status in ("infeasible", "infeasible_or_unbounded"):
-        # SCIP's presolve has proved feasible models infeasible (barrett_cube's grasp read
-        # from MuJoCo, a torque about x: "infeasible" in 0.0 s where the same MIP without
-        # presolve, and HiGHS, find the answer; tests/stability/test_solver_regressions.py). An
+        # SCIP's presolve can prove a feasible model infeasible (barrett_cube's grasp read
+        # from MuJoCo, a torque about x: tests/stability/test_scip_presolve.py). An
         # infeasible round ends a query ("unstable"), so that claim is checked once more
         # without presolve; feasible answers need no second look (they are certified).
         problem.model.presolve = False

@@ -19,8 +19,7 @@ from ..model.query import QueryData
 __all__ = ["HINF", "INFEASIBLE", "OPTIMAL", "Node", "NodeLP", "NodeResult", "TWO_PI"]
 
 # HiGHS's dual simplex pricing: Devex (1); its default, steepest edge, costs more per call
-# than it saves on LPs of a few hundred rows that change by a few bounds per node (measured
-# on the grasps benchmark: 13 % less time in all)
+# than it saves on LPs of a few hundred rows that change by a few bounds per node
 EDGE_WEIGHTS = 1
 OCTAGON = 8  # sides of the outer friction polygon at every node
 HINF = highspy.kHighsInf

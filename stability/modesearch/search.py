@@ -366,8 +366,8 @@ class Search:
         """A full polish (:func:`slide_search`) of a node's point is due: at most one per
         :data:`POLISH_EVERY` nodes taken (a polish costs about as much as that many node
         LPs; counted, not timed, so that a query's answer does not depend on the
-        machine's load). (Polishing at the nodes 10, 20, 40, ... only took 2-3x longer on
-        grasps (f) and (i): later incumbents close brackets.)"""
+        machine's load). A fixed rate, not doubling intervals (nodes 10, 20, 40, ...): the
+        incumbents that close a bracket come from polishes late in the search."""
         return self.polishes * POLISH_EVERY <= self.popped
 
     def finish(self) -> None:
