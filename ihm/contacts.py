@@ -61,7 +61,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -77,6 +76,7 @@ from .handmodel import (
     hand_model,
     transmission,
 )
+from .patches import ContactGroup, merge_contacts, reduce_patches
 
 __all__ = [
     "HandModelError",
@@ -276,23 +276,6 @@ def contact_frame_force(
     return frame, frame @ f_on_obj
 
 
-@dataclass
-class ContactGroup:
-    """One grasp contact: MuJoCo contacts between the same hand and object bodies, merged
-    (world frame). ``pair``: (hand geom, object geom) of the first; ``bodies``: (hand body,
-    object body); ``pos``: the merged contacts' positions [m]; ``frame``: rows n, t1, t2,
-    ``n`` into the object; ``force_world``: the summed force of the hand on the object
-    [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices."""
-
-    pair: tuple[int, int]
-    bodies: tuple[int, int]
-    pos: list[NDArray[np.float64]]
-    frame: NDArray[np.float64]
-    force_world: NDArray[np.float64]
-    mu: float
-    ids: list[int]
-
-
 def _read(
     model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_]
 ) -> list[ContactGroup]:
@@ -314,29 +297,6 @@ def _read(
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
                                 frame, frame.T @ force, mu, [i]))  # fmt: skip
     return out
-
-
-def _merge(contacts: list[ContactGroup], merge_tol: float) -> list[ContactGroup]:
-    """Contacts between the same bodies within ``merge_tol`` [m] of a group's mean position
-    and with normals within 1e-3 rad merged into that group (forces summed, the smallest
-    friction), in MuJoCo's order."""
-    groups: list[ContactGroup] = []
-    for c in contacts:
-        pos = c.pos[0]
-        for g in groups:
-            if (
-                g.bodies == c.bodies
-                and np.linalg.norm(np.mean(g.pos, axis=0) - pos) <= merge_tol
-                and g.frame[0] @ c.frame[0] >= np.cos(1e-3)
-            ):
-                g.pos.append(pos)
-                g.force_world += c.force_world
-                g.ids.append(c.ids[0])
-                g.mu = min(g.mu, c.mu)
-                break
-        else:
-            groups.append(c)
-    return groups
 
 
 def grasp_from_mujoco(
@@ -398,14 +358,14 @@ def grasp_from_mujoco(
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
-    groups = _merge(_read(model, data, in_obj), merge_tol)
+    groups = merge_contacts(_read(model, data, in_obj), merge_tol)
     if not groups:
         raise GraspError(
             f"no active contact between body {object_body!r} and the hand "
             f"({data.ncon} MuJoCo contacts in all); settle the grasp first"
         )
     if reduce is not None:
-        groups = _reduce_patches(groups, 0 if reduce == "line" else patch_points)
+        groups = reduce_patches(groups, 0 if reduce == "line" else patch_points)
 
     hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
                     stop_gap=stop_gap, spring_held=spring_held,
@@ -511,150 +471,5 @@ def _hand_residual(J: NDArray[np.float64], forces: NDArray[np.float64], hm: Hand
     return rel
 
 
-def _third_point(p: list[ContactGroup], pts: NDArray[np.float64], two: list[int]) -> int:
-    """The point whose triangle with ``two`` holds the patch's centre of pressure deepest
-    (largest smallest barycentric coordinate, in the patch plane): the kept normal forces
-    can then stay >= 0."""
-    frame = p[0].frame
-    fn = np.array([g.force_world for g in p]) @ frame[0]
-    cop = (fn @ pts) / fn.sum() if fn.sum() > 0 else pts.mean(axis=0)
-    Y, c = pts @ frame[1:].T, cop @ frame[1:].T
-    best, best_k = -np.inf, -1
-    for k in range(len(pts)):
-        if k in two:
-            continue
-        tri = np.vstack([Y[[two[0], two[1], k]].T, np.ones(3)])
-        if abs(np.linalg.det(tri)) < 1e-18:
-            continue  # collinear
-        lam = np.linalg.solve(tri, np.r_[c, 1.0])
-        if lam.min() > best:
-            best, best_k = float(lam.min()), k
-    if best_k < 0:  # all collinear: the farthest from the first two
-        far = np.linalg.norm(pts[:, None] - pts[two][None], axis=2).min(axis=1)
-        far[two] = -1.0
-        best_k = int(np.argmax(far))
-    return best_k
-
-
-THIN_PATCH_M = 1e-5  # a patch narrower than this [m rms] is a strip for reduce="line"
-
-
-def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``[v]_x``: ``_skew(v) @ f == cross(v, f)``."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 class HandModelWarning(UserWarning):
     """An element of the hand that the grasp model leaves out (named in the message)."""
-
-
-def _patch_wrench(
-    pts: NDArray[np.float64], forces: NDArray[np.float64], centre: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """The wrench ``(f, torque about centre)`` of forces (k, 3) at points (k, 3)."""
-    return np.r_[forces.sum(axis=0), np.cross(pts - centre, forces).sum(axis=0)]
-
-
-def _wrench_map(pts: NDArray[np.float64], centre: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(6, 3k): stacked forces at ``pts`` to their wrench about ``centre``."""
-    return np.vstack(
-        [np.hstack([np.eye(3)] * len(pts)), np.hstack([_skew(q - centre) for q in pts])]
-    )
-
-
-def _line_patch(p: list[ContactGroup]) -> list[ContactGroup] | None:
-    """A patch as two contacts on the line through its centre of pressure along its longest
-    extent, at the patch's boundary (its points' convex hull), forces carrying the patch's
-    whole wrench (exact for coplanar points: about the centre of pressure the normal forces
-    have no in-plane moment). None for a patch whose points are collinear or unloaded."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    frame = p[0].frame
-    pts = np.array([np.mean(g.pos, axis=0) for g in p])
-    forces = np.array([g.force_world for g in p])
-    fn = forces @ frame[0]
-    if fn.sum() <= 0:
-        return None
-    centre = pts.mean(axis=0)
-    Y = (pts - centre) @ frame[1:].T  # in-plane coordinates (t1, t2)
-    cop = (fn @ pts) / fn.sum()
-    c2 = (cop - centre) @ frame[1:].T
-    _, sv, vt = np.linalg.svd(Y - Y.mean(axis=0), full_matrices=False)
-    u2 = vt[0]
-    along = (Y - c2) @ u2
-    if sv[1] <= THIN_PATCH_M * np.sqrt(len(Y)):  # a strip: its extent along the line
-        s_lo, s_hi = float(along.min()), float(along.max())
-    else:
-        try:
-            hull = ConvexHull(Y)
-        except (QhullError, ValueError):
-            return None
-        a, b = hull.equations[:, :2], hull.equations[:, 2]
-        au, slack = a @ u2, -(a @ c2 + b)  # a.(c + s u) + b <= 0  <=>  s (a.u) <= slack
-        s_hi = float(np.min(slack[au > 1e-12] / au[au > 1e-12]))
-        s_lo = float(np.max(slack[au < -1e-12] / au[au < -1e-12]))
-    u3 = u2 @ frame[1:]
-    ends = np.array([cop + s_lo * u3, cop + s_hi * u3])
-    W = _patch_wrench(pts, forces, centre)
-    A = _wrench_map(ends, centre)
-    f0 = np.tile(forces.sum(axis=0) / 2, 2)
-    f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
-    ids = [i for g in p for i in g.ids]
-    mu = min(g.mu for g in p)
-    return [replace(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
-                    force_world=f[3 * k : 3 * k + 3]) for k in range(2)]  # fmt: skip
-
-
-def _reduce_patches(groups: list[ContactGroup], keep: int) -> list[ContactGroup]:
-    """Each patch (same hand and object body, normals within 1e-3 rad) to at most ``keep``
-    contacts, farthest first; a dropped contact's force goes to the nearest kept one and
-    the kept forces are corrected to carry the patch's wrench. ``keep == 0``: the line
-    through the centre of pressure (:func:`_line_patch`)."""
-    patches: list[list[ContactGroup]] = []
-    for g in groups:
-        for p in patches:
-            if p[0].bodies == g.bodies and p[0].frame[0] @ g.frame[0] >= np.cos(1e-3):
-                p.append(g)
-                break
-        else:
-            patches.append([g])
-    out = []
-    for p in patches:
-        if keep == 0 and len(p) > 2:
-            line = _line_patch(p)
-            if line is not None:
-                out.extend(line)
-                continue
-        n_keep = 2 if keep == 0 else keep
-        if len(p) <= n_keep:
-            out.extend(p)
-            continue
-        pts = np.array([np.mean(g.pos, axis=0) for g in p])
-        dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
-        i, j = np.unravel_index(np.argmax(dist), dist.shape)
-        chosen = [int(i), int(j)]
-        if n_keep >= 3:  # the third: the triangle that best contains the centre of pressure
-            chosen.append(_third_point(p, pts, chosen))
-        while len(chosen) < n_keep:
-            far = dist[:, chosen].min(axis=1)
-            far[chosen] = -1.0
-            chosen.append(int(np.argmax(far)))
-        kept = [replace(p[k], pos=list(p[k].pos), ids=list(p[k].ids),
-                        force_world=p[k].force_world.copy()) for k in chosen]  # fmt: skip
-        for k, g in enumerate(p):
-            if k in chosen:
-                continue
-            near = kept[int(np.argmin(dist[k, chosen]))]
-            near.force_world = near.force_world + g.force_world
-            near.ids = near.ids + g.ids
-            near.mu = min(near.mu, g.mu)
-        # keep the patch's wrench: f = f0 + A^+ (W - A f0), A the kept points' wrench map
-        centre = pts.mean(axis=0)
-        W = _patch_wrench(pts, np.array([g.force_world for g in p]), centre)
-        A = _wrench_map(pts[chosen], centre)
-        f0 = np.concatenate([g.force_world for g in kept])
-        f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
-        for k, g in enumerate(kept):
-            g.force_world = f[3 * k : 3 * k + 3]
-        out.extend(kept)
-    return out
