@@ -39,6 +39,7 @@ def test_scene_rows_through_the_batch_give_the_analysis_map(tmp_path: Path) -> N
     assert solve(g, qq, method="no_mdp").status == "solved"
 
 
+@pytest.mark.slow
 def test_ihm_map_on_ray_equals_local(tmp_path: Path) -> None:
     import ray
 

@@ -74,6 +74,7 @@ def _fifty(path: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_local_and_ray_give_identical_rows(tmp_path: Path, ray_cluster) -> None:
     q = _fifty(tmp_path / "q.jsonl")
     opts = {"time_limit": 60.0}
@@ -136,7 +137,7 @@ def test_resume_after_a_kill_answers_every_query_once(tmp_path: Path) -> None:
     assert all(_same(final[k], first[k]) for k in first)  # the first run's rows kept
 
 
-@pytest.mark.parametrize("executor", ["local", "ray"])
+@pytest.mark.parametrize("executor", ["local", pytest.param("ray", marks=pytest.mark.slow)])
 def test_a_worker_killed_mid_query_loses_nothing(
     tmp_path: Path, executor: str, request: pytest.FixtureRequest
 ) -> None:

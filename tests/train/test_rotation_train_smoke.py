@@ -27,6 +27,7 @@ def _train_ppo(*args: str) -> subprocess.CompletedProcess:
     )  # fmt: skip
 
 
+@pytest.mark.slow
 def test_train_ppo_main_job_smoke_and_resume(tmp_path) -> None:
     """``python -m train.ppo`` (no task: the rotation main job) with a tiny budget writes the
     model, normalisation, evaluation, curve; --resume adds steps."""

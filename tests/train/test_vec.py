@@ -156,6 +156,7 @@ def _rollout(
     return out, vec
 
 
+@pytest.mark.slow
 def test_pipelined_ppo_collects_what_sb3_collects() -> None:
     """With frozen normalisation the pipelined rollout buffer equals SB3's collect_rollouts:
     observations, actions, episode starts and log-probabilities bit for bit; rewards (with
