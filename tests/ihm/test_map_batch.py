@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ihm.sim_maps import analysis_map, scene_map_rows
 from stability import solve
