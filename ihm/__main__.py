@@ -239,7 +239,6 @@ def _cmd_show(args: argparse.Namespace) -> int:
         f"hand max|J^T c - R f| = {res['hand']:.3g} [N m]"
     )
     out = args.out if args.out is not None else OUT_DIR / f"{args.scene}.png"
-    out.parent.mkdir(parents=True, exist_ok=True)
     png = render_png(
         model,
         data,

@@ -282,7 +282,7 @@ def _read(
     """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`);
     :class:`GraspError` for a contact with torsional or rolling friction."""
     out = []
-    for i, _, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
+    for i, hand_geom, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
         con = data.contact[i]
         if con.dim > 3:
             raise GraspError(
@@ -291,7 +291,7 @@ def _read(
                 "rolling friction is not in the point-contact model; use condim 1 or 3"
             )
         frame, force = contact_frame_force(model, data, i, obj_first)
-        hand_geom, obj_geom = (con.geom2, con.geom1) if obj_first else (con.geom1, con.geom2)
+        obj_geom = con.geom1 if obj_first else con.geom2
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],

@@ -345,7 +345,7 @@ def _map_jobs(fn: Any, jobs: list, workers: int, init: Any, initargs: tuple, pro
 
         from stability.batch import make_executor
 
-        closer = make_executor(workers if ray is None or workers > 1 else None, ray)
+        closer = make_executor(workers if workers > 1 else None, ray)
         task = functools.partial(_with_init, uuid.uuid4().hex, init, initargs, fn)
         it = _values(closer.run(task, enumerate(jobs)))
         desc += " (ray)" if ray is not None else ""
@@ -468,7 +468,6 @@ def run(
             maps.append((f"{method}, {what}{tag}", rm))
             keys.append((method, what))
     stem = f"{scene}_{plane}" + ("_object" if frame == "object" else "")
-    Path(out).mkdir(parents=True, exist_ok=True)
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
     title = f"{scene}: resistible force in the {frame} {plane} plane [N] (cap {cap:g} N)"
     png = plot_maps(out / f"{stem}.png", maps, title)

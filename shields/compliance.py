@@ -170,7 +170,7 @@ class _HandInfo:
         if model.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC:
             raise ShieldError("the compliance model reads elliptic-cone contact rows; set cone")
         self.obj = obj
-        self.in_obj = body_subtree(model, obj).tolist()
+        in_obj = body_subtree(model, obj).tolist()
         dofs, kp = [], []
         for a in range(model.nu):
             if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
@@ -196,7 +196,7 @@ class _HandInfo:
         self.names = [model.body(b).name for b in range(model.nbody)]
         self.nbody = model.nbody
         self.geom_body = model.geom_bodyid.tolist()
-        self.geom_in_obj = [self.in_obj[b] for b in self.geom_body]
+        self.geom_in_obj = [in_obj[b] for b in self.geom_body]
         self.static = (model.body_weldid == 0).tolist()
 
 

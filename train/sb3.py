@@ -304,19 +304,20 @@ class TqdmProgress(BaseCallback):
     def _show(self, refresh: bool) -> None:
         """The recent rate and the time left at it (steps left / rate); tqdm's own average
         since the start until a second rollout has started."""
-        rate = self.recent
-        if not (math.isfinite(rate) and rate > 0):
-            d = self.bar.format_dict
-            rate = d["n"] / d["elapsed"] if d["elapsed"] > 0 and d["n"] > 0 else float("nan")
+        rate = self.recent if math.isfinite(self.recent) else self._average()
         if math.isfinite(rate) and rate > 0:
             left = tqdm.format_interval((self.bar.total - self.bar.n) / rate)
             self.bar.set_postfix_str(f"{rate:.1f}step/s, {left} left", refresh=False)
         if refresh:
             self.bar.refresh()
 
-    def _on_training_end(self) -> None:
+    def _average(self) -> float:
+        """Steps over the wall time since the start [steps/s] (NaN before any time passed)."""
         d = self.bar.format_dict
-        self.rate = d["n"] / d["elapsed"] if d["elapsed"] > 0 else float("nan")
+        return d["n"] / d["elapsed"] if d["elapsed"] > 0 else float("nan")
+
+    def _on_training_end(self) -> None:
+        self.rate = self._average()
         self.bar.close()
 
 
