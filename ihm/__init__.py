@@ -10,10 +10,19 @@ picks its OpenGL backend when it is created (:mod:`ihm.render`: ``MUJOCO_GL``, e
 Linux).
 """
 
-from .contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates, transmission
+from .contacts import (
+    HandOptions,
+    MujocoSource,
+    SceneGrasp,
+    grasp_from_mujoco,
+    hand_coordinates,
+    transmission,
+)
 from .scenes import SceneError, SettleInfo, available_scenes, load_scene, scene_about, settle
 
 __all__ = [
+    "HandOptions",
+    "MujocoSource",
     "SceneError",
     "SceneGrasp",
     "SettleInfo",

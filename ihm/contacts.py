@@ -60,7 +60,8 @@ The effect of each reduction on the answers is measured in ``docs/linkage.md``.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -81,6 +82,8 @@ from .patches import ContactGroup, merge_contacts, reduce_patches
 __all__ = [
     "HandModelError",
     "HandModelWarning",
+    "HandOptions",
+    "MujocoSource",
     "SceneGrasp",
     "body_subtree",
     "contact_frame_force",
@@ -91,12 +94,73 @@ __all__ = [
 ]
 
 
+@dataclass(frozen=True)
+class HandOptions:
+    """How :func:`grasp_from_mujoco` models the hand (:func:`ihm.handmodel.hand_model`).
+
+    backdrivable : None (force-saturated actuators only), True/False (every actuator), or
+        the names of the backdrivable actuators
+    servo : how an unsaturated position servo enters: ``"nonbackdrivable"`` or ``"force"``
+    stop_gap : a joint limit this close [rad or m] that carries no force yet is a stop too
+    spring_held : a passive motion held by springs alone raises :class:`HandModelError`
+        (``"raise"``) or is modelled with the springs as constant torques and a warning
+        (``"warn"``)
+    """
+
+    backdrivable: bool | tuple[str, ...] | None = None
+    servo: str = "nonbackdrivable"
+    stop_gap: float = 0.0
+    spring_held: str = "raise"
+
+
+@dataclass(frozen=True)
+class MujocoSource:
+    """Where a :class:`SceneGrasp` came from: what MuJoCo reported at the state it was read
+    at, per contact ``k`` of the grasp (object frame, SI units).
+
+    forces : (m, 3) contact forces MuJoCo computed, ``(c_n, c_t1, c_t2)`` [N]
+    hand : the :class:`ihm.handmodel.HandModel` (``T``, columns of ``R``, their commands
+        and actual forces, dependent joints, warnings)
+    hand_residual : ``max |J^T c - R f| / max |J^T c|`` with MuJoCo's forces
+    gravity_wrench : (6,) gravity's wrench on the object about the object origin
+        ``(f, torque)`` [N, N m]
+    hand_bodies : (m,) MuJoCo body id of the hand link at each contact
+    hand_geoms, object_geoms : (m,) MuJoCo geom ids at each contact
+    contact_ids : per contact, the MuJoCo contact indices merged into it
+    object_pos, object_mat : the object frame in world coordinates: origin [m] and
+        rotation (columns the object's axes)
+    """
+
+    forces: NDArray[np.float64]
+    hand: HandModel
+    hand_residual: float
+    gravity_wrench: NDArray[np.float64]
+    hand_bodies: NDArray[np.int64]
+    hand_geoms: NDArray[np.int64]
+    object_geoms: NDArray[np.int64]
+    contact_ids: list[list[int]]
+    object_pos: NDArray[np.float64]
+    object_mat: NDArray[np.float64]
+
+
+class _FromSource:
+    """A read-only attribute of :class:`SceneGrasp`: the field of the same name of its
+    :class:`MujocoSource`."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, grasp: SceneGrasp | None, owner: type | None = None) -> Any:
+        return self if grasp is None else getattr(grasp.source, self.name)
+
+
 class SceneGrasp(Grasp):
     """A :class:`stability.Grasp` read off a MuJoCo state, with what MuJoCo reported.
 
-    Extra attributes (all in the object frame, SI units):
+    ``source`` (:class:`MujocoSource`) records that state; its fields are also read-only
+    attributes of the grasp (``grasp.forces`` is ``grasp.source.forces``), and so are
+    these, from ``source.hand`` (:class:`ihm.handmodel.HandModel`):
 
-    forces : (m, 3) contact forces MuJoCo computed, ``(c_n, c_t1, c_t2)`` [N]
     commands : (a,) ``f_c`` per column of ``R``: actuators their force at this state
         (``data.actuator_force``) [N m for joint actuators, N for tendons], stops 0,
         constant torques (springs, link weight) their torque [N m]
@@ -105,36 +169,59 @@ class SceneGrasp(Grasp):
     actuator_names : names of the ``a`` columns of ``R`` (actuators, ``limit:<joint>``,
         ``spring:<joint>``, ``gravity``, ``applied``)
     elements : :class:`ihm.handmodel.HandElement` per column and folded equality
-    hand : the :class:`ihm.handmodel.HandModel` (``T``, dependent joints, warnings)
-    hand_residual : ``max |J^T c - R f| / max |J^T c|`` with MuJoCo's forces
-    gravity_wrench : (6,) gravity's wrench on the object about the object
-        origin ``(f, torque)`` [N, N m]
     joint_names : names of the ``l`` independent hand joints (columns of ``J``)
     T : (nv_hand, l) independent-to-full hand joint map (coupled joints)
     hand_dofs : (nv_hand,) MuJoCo dof indices of the hand
-    hand_bodies : (m,) MuJoCo body id of the hand link at each contact
-    hand_geoms, object_geoms : (m,) MuJoCo geom ids at each contact
-    contact_ids : per contact, the MuJoCo contact indices merged into it
-    object_pos, object_mat : object frame in world coordinates
     """
 
-    forces: NDArray[np.float64]
-    commands: NDArray[np.float64]
-    actuator_forces: NDArray[np.float64]
-    elements: list[HandElement]
-    hand: HandModel
-    hand_residual: float
-    gravity_wrench: NDArray[np.float64]
-    joint_names: list[str]
-    actuator_names: list[str]
-    T: NDArray[np.float64]
-    hand_dofs: NDArray[np.int64]
-    hand_bodies: NDArray[np.int64]
-    hand_geoms: NDArray[np.int64]
-    object_geoms: NDArray[np.int64]
-    contact_ids: list[list[int]]
-    object_pos: NDArray[np.float64]
-    object_mat: NDArray[np.float64]
+    forces = _FromSource()
+    hand = _FromSource()
+    hand_residual = _FromSource()
+    gravity_wrench = _FromSource()
+    hand_bodies = _FromSource()
+    hand_geoms = _FromSource()
+    object_geoms = _FromSource()
+    contact_ids = _FromSource()
+    object_pos = _FromSource()
+    object_mat = _FromSource()
+
+    def __init__(self, *, source: MujocoSource, **grasp: Any) -> None:
+        """``grasp``: :class:`stability.Grasp`'s arguments; ``source``: the MuJoCo record."""
+        super().__init__(**grasp)
+        self._source = source
+
+    @property
+    def source(self) -> MujocoSource:
+        """What MuJoCo reported at the state this grasp was read at."""
+        return self._source
+
+    @property
+    def commands(self) -> NDArray[np.float64]:
+        return self.source.hand.commands
+
+    @property
+    def actuator_forces(self) -> NDArray[np.float64]:
+        return self.source.hand.forces
+
+    @property
+    def actuator_names(self) -> list[str]:
+        return self.source.hand.names
+
+    @property
+    def elements(self) -> list[HandElement]:
+        return self.source.hand.elements
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self.source.hand.joint_names
+
+    @property
+    def T(self) -> NDArray[np.float64]:  # noqa: N802 (the thesis' symbol)
+        return self.source.hand.T
+
+    @property
+    def hand_dofs(self) -> NDArray[np.int64]:
+        return self.source.hand.dofs
 
     def points_world(self) -> NDArray[np.float64]:
         """Contact points in world coordinates, (m, 3) [m]."""
@@ -307,10 +394,7 @@ def grasp_from_mujoco(
     merge_tol: float = 1e-4,
     reduce: str | None = None,
     patch_points: int = 3,
-    backdrivable: bool | Iterable[str] | None = None,
-    servo: str = "nonbackdrivable",
-    stop_gap: float = 0.0,
-    spring_held: str = "raise",
+    hand: HandOptions | None = None,
     hand_rtol: float = 0.02,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
@@ -323,7 +407,7 @@ def grasp_from_mujoco(
     (``contact.friction[0]``; 0 for a frictionless ``condim=1`` contact; ``condim``
     4 or 6, with torsional or rolling friction, is refused). The hand's equalities,
     limits, springs and saturated actuators are modelled as :mod:`ihm.handmodel`
-    says (``backdrivable``, ``servo``, ``stop_gap``, ``spring_held`` are passed to it);
+    says (``hand``: :class:`HandOptions`, default ``HandOptions()``);
     ``grasp.elements`` lists each, ``grasp.commands`` holds ``f_c`` per column of ``R``
     (actuators: their force at the state; stops: 0; constant torques: the torque).
 
@@ -367,10 +451,10 @@ def grasp_from_mujoco(
     if reduce is not None:
         groups = reduce_patches(groups, 0 if reduce == "line" else patch_points)
 
-    hm = hand_model(model, data, in_obj, backdrivable=backdrivable, servo=servo,
-                    stop_gap=stop_gap, spring_held=spring_held,
+    ho = HandOptions() if hand is None else hand
+    hm = hand_model(model, data, in_obj, backdrivable=ho.backdrivable, servo=ho.servo,
+                    stop_gap=ho.stop_gap, spring_held=ho.spring_held,
                     object_contacts=[i for g in groups for i in g.ids])  # fmt: skip
-    hand_dofs, T = hm.dofs, hm.T
     pts_w = np.array([np.mean(g.pos, axis=0) for g in groups])
     frames_w = np.array([g.frame for g in groups])  # (m, 3, 3) rows n, t1, t2
     forces = np.einsum("mkj,mj->mk", frames_w, np.array([g.force_world for g in groups]))
@@ -379,43 +463,36 @@ def grasp_from_mujoco(
     if reduce is not None:  # can the reduced points carry MuJoCo's state?
         _warn_outside_cone(model, groups, forces, hand_bodies, reduce)
     J = _hand_jacobian(model, data, pts_w, frames_w, hand_bodies, hm)
-    R = hm.R
-
     pts_o = (pts_w - x_o) @ R_o
     frames_o = frames_w @ R_o  # each row v -> R_o^T v
-    grasp = SceneGrasp(
+    for w in hm.warnings:
+        warnings.warn(f"grasp_from_mujoco: not in the grasp model: {w}", HandModelWarning,
+                      stacklevel=2)  # fmt: skip
+    mass = model.body_subtreemass[obj]
+    f_g = mass * model.opt.gravity
+    tau_g = np.cross(data.subtree_com[obj] - x_o, f_g)
+    source = MujocoSource(
+        forces=forces,
+        hand=hm,
+        hand_residual=_hand_residual(J, forces, hm, hand_rtol),
+        gravity_wrench=np.concatenate([R_o.T @ f_g, R_o.T @ tau_g]),
+        hand_bodies=hand_bodies,
+        hand_geoms=hand_geoms,
+        object_geoms=np.array([g.pair[1] for g in groups], dtype=np.int64),
+        contact_ids=[g.ids for g in groups],
+        object_pos=x_o,
+        object_mat=R_o,
+    )
+    return SceneGrasp(
         points=pts_o,
         normals=frames_o[:, 0],
         mu=[g.mu for g in groups],
         tangents=frames_o[:, 1:],
         J=J,
-        R=R,
+        R=hm.R,
         backdrivable=hm.backdrivable,
+        source=source,
     )
-    mass = model.body_subtreemass[obj]
-    f_g = mass * model.opt.gravity
-    tau_g = np.cross(data.subtree_com[obj] - x_o, f_g)
-    grasp.forces = forces
-    grasp.commands = hm.commands
-    grasp.actuator_forces = hm.forces
-    grasp.gravity_wrench = np.concatenate([R_o.T @ f_g, R_o.T @ tau_g])
-    grasp.joint_names = hm.joint_names
-    grasp.actuator_names = hm.names
-    grasp.elements = hm.elements
-    grasp.hand = hm
-    grasp.T = T
-    grasp.hand_dofs = hand_dofs
-    grasp.hand_bodies = hand_bodies
-    grasp.hand_geoms = hand_geoms
-    grasp.object_geoms = np.array([g.pair[1] for g in groups], dtype=np.int64)
-    grasp.contact_ids = [g.ids for g in groups]
-    grasp.object_pos = x_o
-    grasp.object_mat = R_o
-    for w in hm.warnings:
-        warnings.warn(f"grasp_from_mujoco: not in the grasp model: {w}", HandModelWarning,
-                      stacklevel=2)  # fmt: skip
-    grasp.hand_residual = _hand_residual(J, forces, hm, hand_rtol)
-    return grasp
 
 
 def _warn_outside_cone(model: mujoco.MjModel, groups: list[ContactGroup],

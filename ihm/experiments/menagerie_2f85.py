@@ -33,7 +33,7 @@ import numpy as np
 from stability import Existence, MaxDisturbance, solve
 from stability.io import write_csv
 
-from ..contacts import HandModelError, grasp_from_mujoco
+from ..contacts import HandModelError, HandOptions, grasp_from_mujoco
 from ..resistance import simulated_resistance
 from ..scenes import settle
 
@@ -99,7 +99,9 @@ def run(path: str | Path, time_limit: float = 30.0) -> list[dict[str, Any]]:
     for gap in (0.0, 0.02):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            g = grasp_from_mujoco(model, data, reduce="line", stop_gap=gap, spring_held="warn")
+            g = grasp_from_mujoco(
+                model, data, reduce="line", hand=HandOptions(stop_gap=gap, spring_held="warn")
+            )
         note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
         variant = f"line, stop_gap {gap:g}"
         t0 = time.perf_counter()

@@ -15,7 +15,7 @@ import pytest
 
 import ihm
 import ihm.handmodel
-from ihm.contacts import HandModelError, HandModelWarning, grasp_from_mujoco
+from ihm.contacts import HandModelError, HandModelWarning, HandOptions, grasp_from_mujoco
 from ihm.hands import linkage_gripper as lg
 from ihm.resistance import simulated_resistance
 from ihm.scenes import SceneError, load_scene
@@ -71,7 +71,7 @@ def test_without_folding_the_equalities_it_fails(settled, monkeypatch):
 
     monkeypatch.setattr(ihm.handmodel, "_fold", no_fold)
     with pytest.raises(HandModelError, match="hand equilibrium J\\^T c = R f does not hold"):
-        grasp_from_mujoco(model, data, spring_held="warn")
+        grasp_from_mujoco(model, data, hand=HandOptions(spring_held="warn"))
 
 
 def test_elements_read_back_from_mujoco(settled):
@@ -295,7 +295,7 @@ def test_stop_gap_and_near_limit_warning():
     with pytest.warns(HandModelWarning, match="lslide .* from its limit"):
         g = grasp_from_mujoco(model, data)
     assert "limit:lslide" not in g.actuator_names
-    g = grasp_from_mujoco(model, data, stop_gap=0.002)
+    g = grasp_from_mujoco(model, data, hand=HandOptions(stop_gap=0.002))
     k = g.actuator_names.index("limit:lslide")
     assert g.commands[k] == 0.0 and g.actuator_forces[k] == 0.0 and not g.backdrivable[k]
     assert np.allclose(g.R[:, k], [-1.0, 0.0])  # pushes lslide back, away from its limit
@@ -329,6 +329,6 @@ def test_spring_held_motion_is_refused_by_name():
     with pytest.raises(HandModelError, match="held by the spring.*spring:rslide.*Not supported"):
         grasp_from_mujoco(model, data)
     with pytest.warns(HandModelWarning, match="spring:rslide: a passive motion"):
-        g = grasp_from_mujoco(model, data, spring_held="warn")
+        g = grasp_from_mujoco(model, data, hand=HandOptions(spring_held="warn"))
     k = g.actuator_names.index("spring:rslide")
     assert g.backdrivable[k] and g.hand_residual < 1e-3
