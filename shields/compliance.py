@@ -253,51 +253,99 @@ def linearize(
     if not horizon > 0 or not np.isfinite(horizon):
         raise ShieldError(f"horizon must be a finite number > 0 [s], got {horizon!r}")
     info = _info(model, object_body)
-    obj, geom_body = info.obj, info.geom_body
-    n_servo = len(info.dofs)
+    obj = info.obj
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
-    ids, bodies, sign, dims = [], [], [], []
-    con = data.contact
-    dim = con.dim.tolist()
-    for i, other, o1 in object_contact_ids(data, info.geom_in_obj):
-        ids.append(i)
-        bodies.append(geom_body[other])
-        sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
-        dims.append(dim[i])
+    ids, bodies, sign, dims = _object_contacts(data, info)
     m = len(ids)
     if m == 0:
-        z = np.zeros
-        return GraspLinearization(
-            np.zeros(0, np.int64), np.zeros(0, np.int64), [], z((0, 3)), z((0, 3, 3)),
-            z((0, 3)), z(0), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(),
-            z((0, 0)), z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
-        )  # fmt: skip
+        return _no_contacts(info, x_o, R_o, horizon)
     if min(dims) < 3 or max(dims) > 4:
         raise ShieldError(
             "object contacts must have condim 3 (point contact with friction) or 4 (with "
             f"torsional friction); got {sorted(set(dims))}"
         )
     nc = max(dims)
+    con = data.contact
     idx = np.array(ids)
     s = np.array(sign)
     frames = con.frame[idx].reshape(m, 3, 3)
     frames[:, :2] *= s[:, None, None]
-    a = con.efc_address[idx]
-    ef = data.efc_force
+    tors = np.array(dims) == 4
+    forces, C_contact = _contact_rows(data, con.efc_address[idx], s, tors, nc, horizon)
+    points = con.pos[idx]
+    fr = con.friction[idx]
+    G = _grasp_map(frames, points, x_o, nc)
+    J = _hand_jacobian(model, data, info, bodies, points, frames, nc)
+    K, F, E = _object_response(G, J, C_contact, info.C_joint)
+    return GraspLinearization(
+        contact_ids=idx.astype(np.int64),
+        bodies=np.array(bodies, dtype=np.int64),
+        links=[info.names[b] for b in bodies],
+        points=points,
+        frames=frames,
+        forces=forces,
+        mu=fr[:, 0],
+        mu_torsion=np.where(tors, fr[:, 2], 0.0) if nc == 4 else np.zeros(m),
+        G=G,
+        J=J,
+        C_contact=C_contact,
+        C_joint=info.C_joint.copy(),
+        K=K,
+        F=F,
+        E=E,
+        object_pos=x_o,
+        object_mat=R_o,
+        horizon=float(horizon),
+    )
+
+
+def _object_contacts(
+    data: mujoco.MjData, info: _HandInfo
+) -> tuple[list[int], list[int], list[float], list[int]]:
+    """The object's active contacts: their MuJoCo contact indices, the hand-side bodies, the
+    frame sign (-1 where the object is geom1: ``n`` and ``t1`` flip to point into the
+    object) and the contact dimensions (``condim``)."""
+    ids, bodies, sign, dims = [], [], [], []
+    dim = data.contact.dim.tolist()
+    for i, other, o1 in object_contact_ids(data, info.geom_in_obj):
+        ids.append(i)
+        bodies.append(info.geom_body[other])
+        sign.append(-1.0 if o1 else 1.0)  # object is geom1: flip n and t1
+        dims.append(dim[i])
+    return ids, bodies, sign, dims
+
+
+def _no_contacts(
+    info: _HandInfo, x_o: NDArray[np.float64], R_o: NDArray[np.float64], horizon: float
+) -> GraspLinearization:
+    """The linearisation of an object that touches nothing: ``m = 0``, empty maps."""
+    n_servo = len(info.dofs)
+    z = np.zeros
+    return GraspLinearization(
+        np.zeros(0, np.int64), np.zeros(0, np.int64), [], z((0, 3)), z((0, 3, 3)),
+        z((0, 3)), z(0), z(0), z((6, 0)), z((0, n_servo)), z(0), info.C_joint.copy(),
+        z((0, 0)), z((6, n_servo)), z((0, n_servo)), x_o, R_o, float(horizon),
+    )  # fmt: skip
+
+
+def _contact_rows(
+    data: mujoco.MjData, a: NDArray[np.int64], s: NDArray[np.float64],
+    tors: NDArray[np.bool_], nc: int, horizon: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+    """``(forces (m, nc), C_contact (nc m,))`` from the contacts' constraint rows (first row
+    ``a``, frame sign ``s``, ``tors`` where a contact has a torsional row): the force of
+    the hand on the object [N, N m] and the diagonal compliance, ``R_n / (K_s I)`` [m/N]
+    normal and ``R horizon / B`` tangential [m/N] and torsional [rad/(N m)]."""
     # elliptic cone: the rows a, a+1, a+2 (a+3) are the force (and moment about the normal)
     # on geom2 in MuJoCo's frame; in the frame flipped when the object is geom1, the force of
     # the hand on the object has the same (n, t1) numbers and the opposite t2, and the moment
     # about the (flipped) normal is the same number
     rows = a[:, None] + np.arange(nc)
-    tors = np.array(dims) == 4
     if nc == 4:
         rows[~tors, 3] = a[~tors]  # condim 3 in a condim-4 grasp: no torsional row
-    forces = ef[rows]
+    forces = data.efc_force[rows]
     forces[:, 2] *= s
-    points = con.pos[idx]
-    fr = con.friction[idx]
-    mu = fr[:, 0]
     kbip, R = data.efc_KBIP[rows], data.efc_R[rows]
     # normal: R_n / (K_s I); tangential and torsional: R h / B
     comp = R * horizon / kbip[:, :, 1]
@@ -305,9 +353,16 @@ def linearize(
     if nc == 4 and not tors.all():
         forces[~tors, 3] = 0.0
         comp[~tors, 3] = 1e9  # a condim-3 contact has no torsional friction: a free twist
-    C_contact = comp.reshape(-1)
-    # grasp map, world axes: f = frame^T c, torque = (p - x_o) x f = [r]_x frame^T c, and the
-    # torsional moment c_tau about n
+    return forces, comp.reshape(-1)
+
+
+def _grasp_map(
+    frames: NDArray[np.float64], points: NDArray[np.float64], x_o: NDArray[np.float64], nc: int
+) -> NDArray[np.float64]:
+    """``G`` (6, nc m), world axes, about the object origin ``x_o``: ``f = frame^T c``,
+    torque ``= (p - x_o) x f = [r]_x frame^T c``, and the torsional moment ``c_tau`` about
+    ``n`` (``nc = 4``)."""
+    m = len(frames)
     Ft = frames.transpose(0, 2, 1)  # (m, 3, 3): columns n, t1, t2 in world
     r = points - x_o
     Gc = np.zeros((m, 6, nc))
@@ -317,22 +372,43 @@ def linearize(
     Gc[:, 3:, :3] = rx.reshape(m, 3, 3) @ Ft
     if nc == 4:
         Gc[:, 3:, 3] = frames[:, 0]
-    G = Gc.transpose(1, 0, 2).reshape(6, nc * m)
-    J = np.zeros((nc * m, n_servo))
+    return Gc.transpose(1, 0, 2).reshape(6, nc * m)
+
+
+def _hand_jacobian(
+    model: mujoco.MjModel, data: mujoco.MjData, info: _HandInfo, bodies: list[int],
+    points: NDArray[np.float64], frames: NDArray[np.float64], nc: int,
+) -> NDArray[np.float64]:  # fmt: skip
+    """``J`` (nc m, l): the servo setpoints [rad] to the hand's contact-point motion in the
+    contact frames [m] (and, ``nc = 4``, the hand link's rotation about ``n`` [rad]); zero
+    rows for static bodies."""
+    m = len(bodies)
+    J = np.zeros((nc * m, len(info.dofs)))
     jac = np.zeros((6, model.nv))
     jacp, jacr = jac[:3], jac[3:]
-    dofs = info.dofs
     for k in range(m):
         b = bodies[k]
         if info.static[b]:
             continue  # static body: no motion
         mujoco.mj_jac(model, data, jacp, jacr if nc == 4 else None, points[k], b)
-        jk = jac[:, dofs]
+        jk = jac[:, info.dofs]
         J[nc * k : nc * k + 3] = frames[k] @ jk[:3]
         if nc == 4:
             J[nc * k + 3] = frames[k, 0] @ jk[3:]
-    C = (J * info.C_joint) @ J.T
-    C.flat[:: nc * m + 1] += C_contact
+    return J
+
+
+def _object_response(
+    G: NDArray[np.float64], J: NDArray[np.float64], C_contact: NDArray[np.float64],
+    C_joint: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+    """``(K, F, E)`` (module docstring): ``K = (C_contact + J C_joint J^T)^{-1}``, ``F =
+    (G K G^T)^+ G K J``, ``E = K (J - G^T F)``; the inverse by Cholesky where ``G K G^T``
+    is well conditioned, else the pseudo-inverse over its eigenvalues above ``1e-10``
+    relative."""
+    n = len(C_contact)
+    C = (J * C_joint) @ J.T
+    C.flat[:: n + 1] += C_contact
     K = np.linalg.inv(C)
     GK = G @ K
     GKGt = GK @ G.T
@@ -349,23 +425,4 @@ def linearize(
         Vk = V[:, keep]
         F = (Vk / lam[keep]) @ (Vk.T @ GKJ)
     E = K @ J - K @ (G.T @ F)
-    return GraspLinearization(
-        contact_ids=idx.astype(np.int64),
-        bodies=np.array(bodies, dtype=np.int64),
-        links=[info.names[b] for b in bodies],
-        points=points,
-        frames=frames,
-        forces=forces,
-        mu=mu,
-        mu_torsion=np.where(tors, fr[:, 2], 0.0) if nc == 4 else np.zeros(m),
-        G=G,
-        J=J,
-        C_contact=C_contact,
-        C_joint=info.C_joint.copy(),
-        K=K,
-        F=F,
-        E=E,
-        object_pos=x_o,
-        object_mat=R_o,
-        horizon=float(horizon),
-    )
+    return K, F, E

@@ -16,6 +16,7 @@ from typing import Any
 
 from .errors import GraspError, MethodError
 from .grasp import Grasp
+from .options import MethodOptions
 from .queries import Existence, MaxDisturbance, OptimalCommands, Query
 from .solution import Solution
 
@@ -41,6 +42,7 @@ class MethodInfo:
     spatial: bool
     hand: bool  # answers grasps with a hand model (J, R) and commands
     summary: str
+    options: type[MethodOptions]  # its options, checked once by solve()
 
     def refuses(self, grasp: Grasp, query: Query) -> str | None:
         """Why this method cannot answer, or None when it can."""
@@ -71,13 +73,17 @@ def register(
     queries: tuple[type, ...],
     planar: bool,
     spatial: bool,
+    options: type[MethodOptions],
     hand: bool = False,
     summary: str = "",
 ) -> Callable[[Callable[..., Solution]], Callable[..., Solution]]:
-    """Decorator: add a solver function ``fn(grasp, query, **options) -> Solution``."""
+    """Decorator: add a solver function ``fn(grasp, query, opts, deadline) -> Solution``
+    whose options are the frozen dataclass ``options`` (:class:`MethodOptions`):
+    :func:`solve` builds them from its keyword arguments and starts the
+    :class:`~stability.options.Deadline` of their ``time_limit``."""
 
     def deco(fn: Callable[..., Solution]) -> Callable[..., Solution]:
-        _METHODS[name] = MethodInfo(name, fn, queries, planar, spatial, hand, summary)
+        _METHODS[name] = MethodInfo(name, fn, queries, planar, spatial, hand, summary, options)
         return fn
 
     return deco
@@ -105,15 +111,18 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
     ``method=None`` picks ``"planar"`` for planar grasps, :data:`DEFAULT_SPATIAL_METHOD`
     (``"modesearch"``) for spatial ones; an old name of :data:`RENAMED_METHODS`
     (``"spatial"``, now ``"exact"``) still works and emits a ``DeprecationWarning``.
-    ``stats["time_s"]`` is the wall time of the method call [s].
+    ``options`` are the method's (``method_info(method).options``, a frozen dataclass),
+    checked once here. ``stats["time_s"]`` is the wall time of the method call [s].
 
     Raises
     ------
     MethodError
-        Unknown method, or one that cannot answer this query on this grasp;
-        the message names the methods that can.
+        Unknown method, or one that cannot answer this query on this grasp (the message
+        names the methods that can); an unknown option or one of the wrong type (the
+        message lists the method's options).
     GraspError
-        Invalid query data (shapes, NaN, negative preload, ...).
+        Invalid query data (shapes, NaN, negative preload, ...) or an option out of its
+        range.
     """
     if not isinstance(grasp, Grasp):
         raise GraspError(f"grasp must be a stability.Grasp, got {type(grasp).__name__}")
@@ -146,8 +155,9 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
             f"method {method!r} {reason}; methods that can answer this "
             f"{type(query).__name__} query on this grasp: {able or 'none yet'}"
         )
+    opts = info.options.of(method, options)
     t0 = time.perf_counter()
-    sol = info.fn(grasp, query, **options)
+    sol = info.fn(grasp, query, opts, opts.deadline())
     sol.stats["time_s"] = time.perf_counter() - t0
     return _answer_or_error(sol)
 

@@ -100,6 +100,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -113,14 +114,13 @@ from .model.coulomb import CoulombModel, exact_conditions, polish
 from .model.problem import scale_bounds
 from .model.query import QueryData, add_query, query_value
 from .model.run import MipOptions, Stop, bounds_stats, solution, stopped
+from .options import Deadline, check_ranges, enlarge_box, finite
 from .queries import Existence, MaxDisturbance, OptimalCommands
 from .solution import Solution, slide_alignment
 
-__all__: list[str] = []
+__all__ = ["ExactOptions"]
 
-_EXACT_OPTIONS = ("normal_uncertainty", "motion_bound", "feastol", "gap", "recheck", "presolve")
 EXACT_BOUND_FACTOR = 100.0  # the default box (bound_factor); enlarged where an answer reaches it
-BOX_RETRIES = 2  # tenfold enlargements of the box when the answer's motion reaches it
 # MaxDisturbance rechecks (module docstring): the fitted box's smallest cap, as a fraction
 # of the query's, and the relative difference reported as a disagreement
 RECHECK_FLOOR = 1e-3
@@ -128,43 +128,77 @@ RECHECK_RTOL = 1e-3
 ALIGN_RTOL = 1e-6  # slide_alignment [N] beyond this times (1 + force bound): not exact
 
 
+@dataclass(frozen=True)
+class ExactOptions(MipOptions):
+    """Options of ``method="exact"``: :class:`~stability.model.run.MipOptions` (``backend``
+    SCIP only: the model is nonlinear; ``bound_factor`` default :data:`EXACT_BOUND_FACTOR`)
+    and ``normal_uncertainty`` [rad] (each normal anywhere in a cone of that half-angle),
+    ``motion_bound`` (the motions' box per ``2 B``), ``feastol`` (SCIP's feasibility
+    tolerance), ``gap`` (SCIP's relative gap, the bracket's closing width), ``recheck`` and
+    ``presolve`` (module docstring)."""
+
+    backend: str | None = "scip"
+    bound_factor: float = EXACT_BOUND_FACTOR
+    normal_uncertainty: float = 0.0
+    motion_bound: float = 4.0
+    feastol: float = 1e-6
+    gap: float = 1e-4
+    recheck: bool = True
+    presolve: bool = True
+
+    @classmethod
+    def of(cls, method: str, options: dict[str, Any]) -> ExactOptions:
+        """:meth:`MipOptions.of` with SCIP as the backend unless another is asked for (a
+        :class:`MethodError`: only SCIP has spatial branch-and-bound)."""
+        return super().of(method, {"backend": "scip", **options})
+
+    def check(self) -> None:
+        if self.backend not in (None, "scip"):
+            raise MethodError(
+                f"method 'exact' needs SCIP's spatial branch-and-bound (backend='scip'), got "
+                f"backend={self.backend!r}: HiGHS has no nonlinear constraints"
+            )
+        super().check()
+        eta = self.normal_uncertainty
+        check_ranges(self, {
+            "normal_uncertainty": (finite(eta) and 0.0 <= eta < math.pi / 2, "in [0, pi/2) rad"),
+            "motion_bound": (finite(self.motion_bound) and self.motion_bound >= 1.0,
+                             "a finite number >= 1"),
+            "feastol": (finite(self.feastol) and 0.0 < self.feastol <= 1e-3, "in (0, 1e-3]"),
+            "gap": (finite(self.gap) and 0.0 <= self.gap < 0.5, "in [0, 0.5)"),
+        })  # fmt: skip
+
+
 @register(
     "exact",
     queries=(Existence, MaxDisturbance, OptimalCommands),
     planar=False,
     spatial=True,
+    options=ExactOptions,
     hand=True,
     summary="exact nonconvex problem (circular cone, bilinear maximum dissipation) solved "
     "globally by SCIP's spatial branch-and-bound: the accuracy reference for small grasps",
 )
-def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
-    # The box (bound_factor times the force scale, default EXACT_BOUND_FACTOR): an answer
-    # whose motion reaches it may have been cut off there; the box then grows tenfold and
-    # the query is solved again, at most BOX_RETRIES times within the same time limit
-    # (module docstring, "The box").
-    t0 = time.perf_counter()
-    limit = options.get("time_limit")
-    options.setdefault("bound_factor", EXACT_BOUND_FACTOR)
-    factor = float(options["bound_factor"])
-    grown: list[str] = []
+def _solve_exact(grasp: Grasp, query: Any, opts: ExactOptions, deadline: Deadline) -> Solution:
+    # The box (bound_factor times the force scale): an optimisation answer whose motion
+    # reaches it may have been cut off there; it grows tenfold and the query is solved
+    # again (module docstring, "The box").
     optimisation = isinstance(query, MaxDisturbance | OptimalCommands)
-    sol = _solve_once(grasp, query, **options)
-    for _ in range(BOX_RETRIES):
-        if sol.status != "solved" or not sol.stats.get("box_reached") or not optimisation:
-            break  # (an Existence point is exact wherever it lies)
-        factor *= 10.0
-        left = None if limit is None else float(limit) - (time.perf_counter() - t0)
-        if left is not None and left <= 0.0:
-            grown.append(f"bound_factor {factor:g}: no time left")
-            break
-        retry = _solve_once(grasp, query, **{**options, "bound_factor": factor,
-                                              "time_limit": left})  # fmt: skip
-        grown.append(f"bound_factor {factor:g}: {retry.status}, value {retry.value}")
-        if retry.status != "solved" or retry.value is None:
-            break  # (a time-out or an error in the larger box: the answer found stands)
-        sol = retry
-    if grown:
-        sol.stats["box_enlarged"] = grown
+
+    def attempt(factor: float, prev: Solution | None) -> tuple[Solution, str | None]:
+        sol = _solve_once(grasp, query, dataclasses.replace(opts, bound_factor=factor),
+                          deadline)  # fmt: skip
+        reached = sol.status == "solved" and sol.stats.get("box_reached") and optimisation
+        return sol, "the answer's motion reaches the box" if reached else None
+
+    def keep(prev: Solution, sol: Solution) -> str | None:
+        if sol.status != "solved" or sol.value is None:
+            return f"{sol.status}, value {sol.value}"
+        return None
+
+    sol, notes = enlarge_box(attempt, opts.bound_factor, deadline, keep)
+    if notes:
+        sol.stats["box_enlarged"] = notes
     if sol.stats.get("box_reached") and sol.status in ("solved", "timeout"):
         # the dual bound holds only within the box, which the answer reaches: none given
         if isinstance(query, MaxDisturbance):
@@ -174,46 +208,22 @@ def _solve_exact(grasp: Grasp, query: Any, **options: Any) -> Solution:
     return sol
 
 
-def _solve_once(grasp: Grasp, query: Any, **options: Any) -> Solution:
-    """One solve of the query in the box of ``options["bound_factor"]``."""
-    got = {k: options.pop(k) for k in list(options) if k in _EXACT_OPTIONS}
-    eta = float(got.get("normal_uncertainty", 0.0))
-    if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
-        raise GraspError(f"normal_uncertainty must be in [0, pi/2) rad, got {eta!r}")
-    motion_bound = float(got.get("motion_bound", 4.0))
-    if not (math.isfinite(motion_bound) and motion_bound >= 1.0):
-        raise GraspError(f"motion_bound must be a finite number >= 1, got {motion_bound!r}")
-    feastol = float(got.get("feastol", 1e-6))
-    if not (math.isfinite(feastol) and 0.0 < feastol <= 1e-3):
-        raise GraspError(f"feastol must be in (0, 1e-3], got {feastol!r}")
-    gap = float(got.get("gap", 1e-4))
-    if not (math.isfinite(gap) and 0.0 <= gap < 0.5):
-        raise GraspError(f"gap must be in [0, 0.5), got {gap!r}")
-    recheck, presolve = got.get("recheck", True), got.get("presolve", True)
-    for name, flag in (("recheck", recheck), ("presolve", presolve)):
-        if not isinstance(flag, bool):
-            raise GraspError(f"{name} must be True or False, got {flag!r}")
-    if options.get("backend") not in (None, "scip"):
-        raise MethodError(
-            f"method 'exact' needs SCIP's spatial branch-and-bound (backend='scip'), got "
-            f"backend={options['backend']!r}: HiGHS has no nonlinear constraints"
-        )
-    options["backend"] = "scip"
-    opts = MipOptions.of("exact", options)
+def _solve_once(grasp: Grasp, query: Any, opts: ExactOptions, deadline: Deadline) -> Solution:
+    """One solve of the query in the box of ``opts.bound_factor``."""
     if grasp.planar:
         raise GraspError("method 'exact' takes spatial grasps; use 'planar' for planar ones")
     data = QueryData.of(grasp, query, opts.bound_factor)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
-    stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": eta, "feastol": feastol,
-                             "gap": gap}  # fmt: skip
+    stats: dict[str, Any] = {"backend": "scip", "normal_uncertainty": opts.normal_uncertainty,
+                             "feastol": opts.feastol, "gap": opts.gap}  # fmt: skip
     bounds_stats(bounds, stats)
-    conditions = exact_conditions(eta)
+    conditions = exact_conditions(opts.normal_uncertainty)
     t0 = time.perf_counter()
-    args = (grasp, opts, eta, motion_bound, feastol, gap, presolve, recheck)
+    run = _Run(grasp, opts, deadline)
     try:
-        ex, var, res = _attempt(data, bounds, *args, stats)
-        if res is not None and data.direction is not None and recheck:
-            ex, var, res, data = _recheck(data, ex, var, res, *args, stats)
+        ex, var, res = run.attempt(data, bounds, stats)
+        if res is not None and data.direction is not None and opts.recheck:
+            ex, var, res, data = _recheck(run, data, (ex, var, res), stats)
     except Stop as e:
         # a time-out's incumbent is on the feasible side only if its point passed the
         # exact conditions (_run: stats["incumbent_checked"])
@@ -286,27 +296,36 @@ def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
     return sol
 
 
-def _attempt(data: QueryData, bounds: Any, grasp: Grasp, opts: MipOptions, eta: float,
-             motion_bound: float, feastol: float, gap: float, presolve: bool, recheck: bool,
-             stats: dict[str, Any]) -> tuple[CoulombModel, int | None, Any]:  # fmt: skip
-    """The exact model of ``data`` within ``bounds``, its query variable and SCIP's
-    checked point (None: infeasible); :class:`Stop` otherwise."""
-    ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
-    var = add_query(ex.prob, data)
-    ex.prob.model.presolve = presolve
-    return ex, var, _run(ex, opts, feastol, gap, recheck, stats)
+@dataclass(frozen=True)
+class _Run:
+    """What every SCIP solve of one query shares: the grasp, the options, the deadline."""
+
+    grasp: Grasp
+    opts: ExactOptions
+    deadline: Deadline
+
+    def attempt(self, data: QueryData, bounds: Any,
+                stats: dict[str, Any]) -> tuple[CoulombModel, int | None, Any]:  # fmt: skip
+        """The exact model of ``data`` within ``bounds``, its query variable and SCIP's
+        checked point (None: infeasible); :class:`Stop` otherwise."""
+        o = self.opts
+        ex = CoulombModel(self.grasp, data, bounds, o.normal_uncertainty, o.motion_bound)
+        var = add_query(ex.prob, data)
+        ex.prob.model.presolve = o.presolve
+        return ex, var, _run(ex, self, stats)
 
 
-def _recheck(data: QueryData, ex: CoulombModel, var: int | None, res: NDArray[np.float64],
-             grasp: Grasp, opts: MipOptions, eta: float, motion_bound: float, feastol: float,
-             gap: float, presolve: bool, recheck: bool,
+def _recheck(run: _Run, data: QueryData, found: tuple[CoulombModel, int | None, Any],
              stats: dict[str, Any]) -> tuple:  # fmt: skip
     """MaxDisturbance: SCIP's optimum ``v`` below the cap solved once more in a box fitted
     to it (cap ``max(2 v, 1e-3 cap)``, the model's bounds from that; module docstring,
     "Rechecks"), doubling that cap while the answer reaches it. Returns the model, query
     variable, point and data of the higher of the two verified points;
     ``stats["recheck"]`` records the fitted solves. ``stats["dual_bound"]`` stays the
-    query's box's (a fitted box's bounds only that box: its row has it)."""
+    query's box's (a fitted box's bounds only that box: its row has it). ``found``: the
+    model, query variable and point of the query's box."""
+    ex, var, res = found
+    grasp, gap = run.grasp, run.opts.gap
     first = query_value(ex, ex.prob.point(res), var, data)
     cap = data.cap
     fitted = min(cap, max(2.0 * first, RECHECK_FLOOR * cap))
@@ -315,12 +334,11 @@ def _recheck(data: QueryData, ex: CoulombModel, var: int | None, res: NDArray[np
     best = (ex, var, res, data, first)
     while fitted < cap * (1.0 - 1e-9):
         d2 = dataclasses.replace(data, cap=fitted)
-        b2 = scale_bounds(grasp, d2.wrench_max, d2.preload, d2.hand, opts.bound_factor)
+        b2 = scale_bounds(grasp, d2.wrench_max, d2.preload, d2.hand, run.opts.bound_factor)
         sub: dict[str, Any] = {}
         t0 = time.perf_counter()
         try:
-            ex2, var2, res2 = _attempt(d2, b2, grasp, opts, eta, motion_bound, feastol, gap,
-                                       presolve, recheck, sub)  # fmt: skip
+            ex2, var2, res2 = run.attempt(d2, b2, sub)
         except Stop as e:  # the first answer stands, unconfirmed ...
             rows.append({"cap": fitted, "status": e.status, "message": e.message,
                          "objective": sub.get("objective"), "time_s": time.perf_counter() - t0,
@@ -379,24 +397,24 @@ def _recheck(data: QueryData, ex: CoulombModel, var: int | None, res: NDArray[np
     return ex, var, res, dataclasses.replace(d2, cap=cap)
 
 
-def _run(ex: CoulombModel, opts: MipOptions, feastol: float, gap: float, recheck: bool,
-         stats: dict[str, Any]) -> NDArray[np.float64] | None:  # fmt: skip
+def _run(ex: CoulombModel, run: _Run, stats: dict[str, Any]) -> NDArray[np.float64] | None:
     """Solve; the point (None: infeasible), :class:`Stop` on a time-out or an error. With
     ``recheck``, an "infeasible" is checked once more without SCIP's presolve (module
     docstring)."""
-    left = opts.remaining()
+    opts, gap = run.opts, run.opts.gap
+    left = run.deadline.remaining()
     if left is not None and left <= 0.0:
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
-    res = _scip(ex, opts, left, feastol, gap, stats)
+    res = _scip(ex, opts, left, stats)
     infeasible = res.status in ("infeasible", "infeasible_or_unbounded")
-    if infeasible and recheck and ex.prob.model.presolve:
-        left = opts.remaining()
+    if infeasible and opts.recheck and ex.prob.model.presolve:
+        left = run.deadline.remaining()
         if left is not None and left <= 0.0:
             raise Stop("timeout", f"time_limit {opts.time_limit} s reached (rechecking "
                        "SCIP's infeasibility without presolve)")  # fmt: skip
         ex.prob.model.presolve = False
         try:
-            res = _scip(ex, opts, left, feastol, gap, stats)
+            res = _scip(ex, opts, left, stats)
         finally:
             ex.prob.model.presolve = True
         stats["infeasible_rechecked"] = res.status
@@ -450,13 +468,13 @@ def _checked(ex: CoulombModel, x: NDArray[np.float64],
     return x
 
 
-def _scip(ex: CoulombModel, opts: MipOptions, time_limit: float | None, feastol: float,
-          gap: float, stats: dict[str, Any]) -> MipResult:  # fmt: skip
+def _scip(ex: CoulombModel, opts: ExactOptions, time_limit: float | None,
+          stats: dict[str, Any]) -> MipResult:  # fmt: skip
     """One SCIP solve of ``ex`` (presolve as ``ex.prob.model.presolve``); its counts added
     to ``stats``. A solver's internal failure is :class:`Stop` ``"error"``."""
     t0 = time.perf_counter()
     try:
-        m, x = ex.scip_model(time_limit, opts.verbose, feastol, gap)
+        m, x = ex.scip_model(time_limit, opts.verbose, opts.feastol, opts.gap)
         m.setParam("limits/absgap", 1e-9)  # gap is relative: small answers need it so
         if not ex.prob.model.presolve:
             # without presolve SCIP's symmetry detection can run on past the time limit

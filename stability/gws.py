@@ -37,6 +37,8 @@ origin [N, N m].
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError
@@ -45,10 +47,18 @@ from ._lp import solve_lp
 from .api import register
 from .errors import GraspError, SolverError
 from .grasp import Grasp
+from .options import Deadline, MethodOptions
 from .queries import Existence, MaxDisturbance, Query, checked_base, checked_direction_cap
 from .solution import Solution
 
-__all__ = ["primitive_wrenches", "ferrari_canny", "force_closure", "solve_gws", "cone_edges"]
+__all__ = [
+    "GwsOptions",
+    "primitive_wrenches",
+    "ferrari_canny",
+    "force_closure",
+    "solve_gws",
+    "cone_edges",
+]
 
 _IGNORES = "preload, compliance, maximum dissipation"
 
@@ -197,19 +207,33 @@ def _forces(grasp: Grasp, E: NDArray[np.float64], lam: NDArray[np.float64]) -> N
     return (E @ lam).reshape(grasp.m, grasp.dim)
 
 
+@dataclass(frozen=True)
+class GwsOptions(MethodOptions):
+    """Options of ``method="gws"``: ``edges``, the sides of each spatial contact's inscribed
+    friction pyramid (planar cones are exact)."""
+
+    edges: int = 8
+
+    def check(self) -> None:
+        _check_edges(self.edges)
+
+
 @register(
     "gws",
     queries=(Existence, MaxDisturbance),
     planar=True,
     spatial=True,
+    options=GwsOptions,
     hand=False,
     summary=(
         "grasp wrench space baseline (Ferrari-Canny): balancing forces exist in the "
         "friction cones; ignores preload, compliance and maximum dissipation"
     ),
 )
-def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **options: object) -> Solution:
-    """Answer ``query`` with the grasp wrench space model (one LP, HiGHS).
+def solve_gws(grasp: Grasp, query: Query, opts: GwsOptions | None = None,
+              deadline: Deadline | None = None) -> Solution:  # fmt: skip
+    """Answer ``query`` with the grasp wrench space model (one LP, HiGHS; ``edges`` is
+    ``opts.edges``; the LP takes no time limit, ``deadline`` is not read).
 
     Existence(wrench=w): stable iff ``lam >= 0`` exists with ``G E lam + w = 0``
     (``c = E lam``, cones exact planar, ``edges``-edge inscribed pyramids
@@ -237,9 +261,7 @@ def solve_gws(grasp: Grasp, query: Query, edges: int = 8, **options: object) -> 
     SolverError
         HiGHS ends with a status other than optimal or infeasible.
     """
-    if options:
-        raise GraspError(f"unknown option(s) for method 'gws': {sorted(options)}")
-    edges = _check_edges(edges)
+    edges = (GwsOptions() if opts is None else opts).edges
     if not isinstance(query, Existence | MaxDisturbance):
         raise GraspError(f"gws answers Existence and MaxDisturbance, got {type(query).__name__}")
     grasp.per_contact(query.preload, "preload")  # validated for consistency; ignored

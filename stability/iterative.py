@@ -62,23 +62,53 @@ thesis' table; see ``tests/stability/test_no_mdp_iterative.py``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .api import register
-from .errors import GraspError
 from .grasp import Grasp
 from .model.problem import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
 from .model.query import QueryData
 from .model.run import MipOptions, Stop, bounds_stats, run, solution, stopped
+from .options import Deadline, check_ranges, finite
 from .queries import Existence, MaxDisturbance
 from .solution import Solution
 
-__all__: list[str] = []
+__all__ = ["IterativeOptions"]
 
-_ITER_OPTIONS = ("gamma", "epsilon", "net_tol", "max_iter", "length_scale", "bisection_rtol")
+
+@dataclass(frozen=True)
+class IterativeOptions(MipOptions):
+    """Options of ``method="iterative"``: :class:`~stability.model.run.MipOptions` and
+    ``gamma`` (the ray's length per step), ``epsilon`` and ``net_tol`` (Algorithm loop's
+    step and net-wrench tolerances, ``epsilon < net_tol``), ``max_iter`` (steps per loop),
+    ``length_scale`` [m] (torques to forces; default the grasp's), ``bisection_rtol``
+    (MaxDisturbance's bisection, relative)."""
+
+    gamma: float = 10.0
+    epsilon: float = 1e-6
+    net_tol: float = 1e-3
+    max_iter: int = 100
+    length_scale: float | None = None
+    bisection_rtol: float = 1e-3
+
+    def check(self) -> None:
+        super().check()
+        L = self.length_scale
+        positive = "finite and > 0"
+        check_ranges(self, {
+            "gamma": (finite(self.gamma) and self.gamma > 0, positive),
+            "epsilon": (finite(self.epsilon) and self.epsilon > 0, positive),
+            "net_tol": (finite(self.net_tol) and self.net_tol > self.epsilon,
+                        f"finite and above epsilon ({self.epsilon})"),
+            "max_iter": (self.max_iter >= 1, "a positive integer"),
+            "length_scale": (L is None or (finite(L) and L > 0), "finite and > 0 [m]"),
+            "bisection_rtol": (finite(self.bisection_rtol) and self.bisection_rtol > 0,
+                               positive),
+        })  # fmt: skip
 
 
 class _Scheme:
@@ -88,16 +118,14 @@ class _Scheme:
         self,
         grasp: Grasp,
         data: QueryData,
-        opts: MipOptions,
-        gamma: float,
-        epsilon: float,
-        net_tol: float,
-        max_iter: int,
+        opts: IterativeOptions,
+        deadline: Deadline,
         L: float,
         stats: dict[str, Any],
     ) -> None:
-        self.grasp, self.data, self.opts = grasp, data, opts
-        self.gamma, self.epsilon, self.net_tol, self.max_iter = gamma, epsilon, net_tol, max_iter
+        self.grasp, self.data, self.opts, self.deadline = grasp, data, opts, deadline
+        self.gamma, self.epsilon = opts.gamma, opts.epsilon
+        self.net_tol, self.max_iter = opts.net_tol, opts.max_iter
         k = 2 if grasp.planar else 3
         nw = grasp.wrench_dim
         self.weights = np.r_[np.ones(k), np.full(nw - k, 1.0 / L)]  # wrench -> force units
@@ -123,7 +151,7 @@ class _Scheme:
                             hand_reference=self.q_ref)  # fmt: skip
         prob.add_net_wrench(w, self.weights)
         s = prob.add_motion_ray(r_prev, self.metric * w_prev, gamma or self.gamma)
-        pt = run(prob, self.opts, self.stats)
+        pt = run(prob, self.opts, self.deadline, self.stats)
         return prob, pt, (math.nan if pt is None else float(pt.x[s]))
 
     def look_down_ray(
@@ -191,47 +219,23 @@ class _Scheme:
         return "not_converged", prob, pt, trace
 
 
-def _options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    it = {k: options.pop(k) for k in list(options) if k in _ITER_OPTIONS}
-    gamma = float(it.get("gamma", 10.0))
-    epsilon = float(it.get("epsilon", 1e-6))
-    net_tol = float(it.get("net_tol", 1e-3))
-    rtol = float(it.get("bisection_rtol", 1e-3))
-    max_iter = it.get("max_iter", 100)
-    for name, v in (("gamma", gamma), ("epsilon", epsilon), ("net_tol", net_tol),
-                    ("bisection_rtol", rtol)):  # fmt: skip
-        if not (math.isfinite(v) and v > 0):
-            raise GraspError(f"option {name} must be finite and > 0, got {v!r}")
-    if not isinstance(max_iter, int | np.integer) or max_iter < 1:
-        raise GraspError(f"option max_iter must be a positive integer, got {max_iter!r}")
-    if epsilon >= net_tol:
-        raise GraspError(f"epsilon ({epsilon}) must be below net_tol ({net_tol})")
-    L = it.get("length_scale")
-    if L is not None and not (math.isfinite(float(L)) and float(L) > 0):
-        raise GraspError(f"option length_scale must be finite and > 0 [m], got {L!r}")
-    out = dict(gamma=gamma, epsilon=epsilon, net_tol=net_tol, max_iter=int(max_iter),
-               length_scale=None if L is None else float(L), bisection_rtol=rtol)  # fmt: skip
-    return out, options
-
-
 @register(
     "iterative",
     queries=(Existence, MaxDisturbance),
     planar=True,
     spatial=True,
+    options=IterativeOptions,
     hand=True,
     summary="thesis ch. 5: movement-constrained MIP steps along the net wrench (no guarantee)",
 )
-def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
-    it, rest = _options(dict(options))
-    opts = MipOptions.of("iterative", rest)
+def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, opts: IterativeOptions,
+                     deadline: Deadline) -> Solution:  # fmt: skip
     data = QueryData.of(grasp, query)
-    L = it["length_scale"] or length_scale(grasp)
+    L = opts.length_scale or length_scale(grasp)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": opts.backend, "length_scale": L}
     bounds_stats(bounds, stats)
-    sch = _Scheme(grasp, data, opts, it["gamma"], it["epsilon"], it["net_tol"],
-                  it["max_iter"], L, stats)  # fmt: skip
+    sch = _Scheme(grasp, data, opts, deadline, L, stats)
     zero = np.zeros(grasp.wrench_dim)
     try:
         # the commanded preload first (Algorithm loop with w = 0 from r = 0)
@@ -264,7 +268,7 @@ def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, **options:
             if out != "stable":
                 return solution("iterative", grasp, query, False, stats)
             return solution("iterative", grasp, query, True, stats, prob, pt)
-        return _bisect(sch, grasp, query, data, (prob, pt, trace), stats, it["bisection_rtol"])
+        return _bisect(sch, grasp, query, data, (prob, pt, trace), stats, opts.bisection_rtol)
     except Stop as e:
         return stopped("iterative", grasp, query, stats, e)
 

@@ -25,6 +25,7 @@ from .grasp import Grasp
 from .model.problem import ExactProblem, scale_bounds
 from .model.query import QueryData
 from .model.run import MipOptions, Stop, bounds_stats, run, solution, stopped
+from .options import Deadline
 from .queries import Existence, MaxDisturbance
 from .solution import Solution
 
@@ -36,23 +37,24 @@ __all__: list[str] = []
     queries=(Existence, MaxDisturbance),
     planar=True,
     spatial=True,
+    options=MipOptions,
     hand=True,
     summary="thesis ch. 5 baseline: one MIP, friction cone without maximum dissipation "
     "(wrong where a virtual rotation wedges the object)",
 )
-def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
-    opts = MipOptions.of("no_mdp", options)
+def _solve_no_mdp(grasp: Grasp, query: Existence | MaxDisturbance, opts: MipOptions,
+                  deadline: Deadline) -> Solution:  # fmt: skip
     data = QueryData.of(grasp, query)
     stats: dict[str, Any] = {"backend": opts.backend}
-    sol = _attempt(grasp, query, data, opts, opts.bound_factor, stats)
+    sol = _attempt(grasp, query, data, opts, deadline, opts.bound_factor, stats)
     if sol.status == "solved" and (not sol.stable or stats.get("at_bound")):
         # infeasible or at a bound: the bound may be what decided; once more, 100x larger
         stats["retried_bound_factor"] = 100.0 * opts.bound_factor
-        sol = _attempt(grasp, query, data, opts, 100.0 * opts.bound_factor, stats)
+        sol = _attempt(grasp, query, data, opts, deadline, 100.0 * opts.bound_factor, stats)
     return sol
 
 
-def _attempt(grasp, query, data, opts, bound_factor, stats) -> Solution:
+def _attempt(grasp, query, data, opts, deadline, bound_factor, stats) -> Solution:
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, bound_factor)
     prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
     bounds_stats(bounds, stats)
@@ -64,7 +66,7 @@ def _attempt(grasp, query, data, opts, bound_factor, stats) -> Solution:
         s = prob.add_object_equilibrium(base, data.direction, data.cap)
         prob.model.set_objective([s], [1.0], maximize=True)
     try:
-        pt = run(prob, opts, stats)
+        pt = run(prob, opts, deadline, stats)
     except Stop as e:
         return stopped("no_mdp", grasp, query, stats, e)
     if pt is None:

@@ -90,14 +90,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .api import register
-from .errors import GraspError
 from .grasp import Grasp
 from .mip import INF
 from .mip.model import Row
@@ -106,67 +105,64 @@ from .model.edges import TWO_PI, EdgeSet, edge_length
 from .model.problem import ExactBounds, ExactPoint, ExactProblem, scale_bounds
 from .model.query import QueryData, add_query, query_value
 from .model.run import CONDITIONS, MipOptions, Stop, bounds_stats, run, solution, stopped
+from .options import Deadline, check_ranges, enlarge_box, finite
 from .queries import Existence, MaxDisturbance, OptimalCommands
 from .solution import Solution
 
-__all__ = ["EdgeSet", "edge_length"]
+__all__ = ["EdgeSet", "RefinementOptions", "edge_length"]
 
-_REF_OPTIONS = ("initial_edges", "levels", "refine", "normal_uncertainty", "max_rounds",
-                "motion_bound", "start_level", "certify", "certify_gap")  # fmt: skip
 ROUND_GAP = 0.25  # a round's MIP stops within this fraction of certify_gap (relative)
 WINDOW_SLACK = 1e-7  # relative widening of the value window a round searches
 REFINEMENT_BOUND_FACTOR = 1e3  # the default box (bound_factor), see _solve_refinement
-BOX_RETRIES = 2  # tenfold enlargements of the box when it cuts the optimum off
 REFINE_STEP = 2  # levels a needed sector is refined by per round (measured: 2 beats 1, 3)
 
 
-@dataclass
-class _Opts:
+@dataclass(frozen=True)
+class RefinementOptions(MipOptions):
+    """Options of ``method="refinement"``: :class:`~stability.model.run.MipOptions`
+    (``bound_factor`` default :data:`REFINEMENT_BOUND_FACTOR`) and ``initial_edges`` (4 or
+    8 edges per contact at level 1), ``levels`` (``q``: the finest level, ``4 2^q``
+    equivalent edges), ``refine`` (refine the needed sectors; False: uniform edges at
+    ``start_level``), ``normal_uncertainty`` [rad], ``max_rounds``, ``motion_bound`` (the
+    tangential motion bound per edge weight, times ``2 B``), ``start_level`` (uniform edges
+    of this level first; default 1, ``levels + 1`` without refinement), ``certify`` (try
+    each round's answer as an exact solution), ``certify_gap`` (stop when the certified
+    value meets the relaxation's bound within this, relative)."""
+
+    backend: str | None = None
+    bound_factor: float = REFINEMENT_BOUND_FACTOR
     initial_edges: int = 4
     levels: int = 9  # 4 * 2^9 = 2048 equivalent edges (thesis protocol), or a closed bracket
     refine: bool = True
     normal_uncertainty: float = 0.0
     max_rounds: int = 200
-    motion_bound: float = 4.0  # tangential motion bound per edge weight, times 2 B
-    start_level: int | None = None  # uniform edges of this level first (default 1; q + 1
-    # without refinement)
-    certify: bool = True  # try each round's answer as an exact solution (certify)
-    certify_gap: float = 1e-4  # stop when the certified value meets the relaxation's
+    motion_bound: float = 4.0
+    start_level: int | None = None
+    certify: bool = True
+    certify_gap: float = 1e-4
 
-    @classmethod
-    def pop(cls, options: dict[str, Any]) -> _Opts:
-        got = {k: options.pop(k) for k in list(options) if k in _REF_OPTIONS}
-        o = cls(**got)
-        if o.initial_edges not in (4, 8):
-            raise GraspError(f"initial_edges must be 4 or 8, got {o.initial_edges!r}")
-        if not isinstance(o.levels, int | np.integer) or not 0 <= o.levels <= 12:
-            raise GraspError(f"levels (q) must be an integer in [0, 12], got {o.levels!r}")
-        eta = float(o.normal_uncertainty)
-        if not (math.isfinite(eta) and 0.0 <= eta < math.pi / 2):
-            raise GraspError(
-                f"normal_uncertainty must be in [0, pi/2) rad, got {o.normal_uncertainty!r}"
-            )
-        o.normal_uncertainty = eta
-        if not isinstance(o.max_rounds, int | np.integer) or o.max_rounds < 1:
-            raise GraspError(f"max_rounds must be a positive integer, got {o.max_rounds!r}")
-        if not (math.isfinite(float(o.motion_bound)) and float(o.motion_bound) >= 1.0):
-            raise GraspError(f"motion_bound must be a finite number >= 1, got {o.motion_bound!r}")
-        o.refine = bool(o.refine)
-        o.certify = bool(o.certify)
-        gap = float(o.certify_gap)
-        if not (math.isfinite(gap) and 0.0 <= gap < 1.0):
-            raise GraspError(f"certify_gap must be in [0, 1), got {o.certify_gap!r}")
-        o.certify_gap = gap
-        if o.start_level is None:
-            o.start_level = 1 if o.refine else o.levels + 1
-        if (
-            not isinstance(o.start_level, int | np.integer)
-            or not 1 <= o.start_level <= o.levels + 1
-        ):
-            raise GraspError(
-                f"start_level must be an integer in [1, levels + 1], got {o.start_level!r}"
-            )
-        return o
+    def check(self) -> None:
+        super().check()
+        eta = self.normal_uncertainty
+        check_ranges(self, {
+            "initial_edges": (self.initial_edges in (4, 8), "4 or 8"),
+            "levels": (0 <= self.levels <= 12, "an integer in [0, 12]"),
+            "normal_uncertainty": (finite(eta) and 0.0 <= eta < math.pi / 2, "in [0, pi/2) rad"),
+            "max_rounds": (self.max_rounds >= 1, "a positive integer"),
+            "motion_bound": (finite(self.motion_bound) and self.motion_bound >= 1.0,
+                             "a finite number >= 1"),
+            "certify_gap": (finite(self.certify_gap) and 0.0 <= self.certify_gap < 1.0,
+                            "in [0, 1)"),
+            "start_level": (1 <= self.start <= self.levels + 1,
+                            "an integer in [1, levels + 1]"),
+        })  # fmt: skip
+
+    @property
+    def start(self) -> int:
+        """The level of the first round's uniform edges."""
+        if self.start_level is not None:
+            return self.start_level
+        return 1 if self.refine else self.levels + 1
 
     @property
     def gamma(self) -> float:
@@ -292,8 +288,8 @@ class _Relaxation:
 
 
 def _round(
-    grasp: Grasp, data: QueryData, bounds: ExactBounds, edges: list[EdgeSet], ro: _Opts,
-    opts: MipOptions, stats: dict[str, Any],
+    grasp: Grasp, data: QueryData, bounds: ExactBounds, edges: list[EdgeSet],
+    opts: RefinementOptions, deadline: Deadline, stats: dict[str, Any],
     window: tuple[float | None, float | None] = (None, None),
 ) -> tuple[_Relaxation, ExactPoint | None, int | None]:  # fmt: skip
     """One MIP of the loop: the relaxation, its answer (None: infeasible), the index of
@@ -302,7 +298,7 @@ def _round(
     exact value on one side, the previous round's bound on the other): the search skips
     every node outside them."""
     t0 = time.perf_counter()
-    rel = _Relaxation(grasp, data, bounds, edges, ro.normal_uncertainty, ro.motion_bound)
+    rel = _Relaxation(grasp, data, bounds, edges, opts.normal_uncertainty, opts.motion_bound)
     var = add_query(rel.prob, data)
     M = rel.prob.model
     lo, hi = window
@@ -314,10 +310,12 @@ def _round(
         else:  # the weighted commands
             M.add_row(rel.prob.fc, data.weights, lo, hi, "window")
     M.many_small = True
-    M.gap = ROUND_GAP * ro.certify_gap
+    M.gap = ROUND_GAP * opts.certify_gap
     _clock(stats, "build_time_s", t0)
     t0 = time.perf_counter()
-    pt = run(rel.prob, opts, stats)  # the MIP (stats["mip_time_s"]) and its least-motion LP
+    pt = run(
+        rel.prob, opts, deadline, stats
+    )  # the MIP (stats["mip_time_s"]) and its least-motion LP
     _clock(stats, "round_time_s", t0)
     return rel, pt, var
 
@@ -327,21 +325,21 @@ def _clock(stats: dict[str, Any], key: str, t0: float) -> None:
     stats[key] = stats.get(key, 0.0) + time.perf_counter() - t0
 
 
-def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
-    asked = dict(options)  # for the Existence probes (_probe)
-    ro = _Opts.pop(options)
-    opts = MipOptions.of(method, options)
+def _solve(grasp: Grasp, query: Any, opts: RefinementOptions, deadline: Deadline) -> Solution:
+    """One run of Algorithm refinement in the box of ``opts.bound_factor``; :class:`_BoxCut`
+    where an exact point shows the box cut the optimum off."""
+    method = "refinement"
     data = QueryData.of(grasp, query, opts.bound_factor)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
-    stats: dict[str, Any] = {"backend": opts.backend, "initial_edges": ro.initial_edges,
-                             "levels": ro.levels, "equivalent_edges": ro.equivalent_edges,
-                             "normal_uncertainty": ro.normal_uncertainty}  # fmt: skip
+    stats: dict[str, Any] = {"backend": opts.backend, "initial_edges": opts.initial_edges,
+                             "levels": opts.levels, "equivalent_edges": opts.equivalent_edges,
+                             "normal_uncertainty": opts.normal_uncertainty}  # fmt: skip
     bounds_stats(bounds, stats)
-    g, q = ro.gamma, ro.levels
-    k0 = ro.initial_edges * 2 ** (ro.start_level - 1)
-    edges = [EdgeSet.uniform(k0, ro.start_level, g, q) for _ in range(grasp.m)]
+    g, q = opts.gamma, opts.levels
+    k0 = opts.initial_edges * 2 ** (opts.start - 1)
+    edges = [EdgeSet.uniform(k0, opts.start, g, q) for _ in range(grasp.m)]
     conditions = tuple(c for c in CONDITIONS if c != "friction_cone")
-    if ro.normal_uncertainty > 0:
+    if opts.normal_uncertainty > 0:
         conditions = tuple(c for c in conditions if c != "spring_law")
     trace: list[dict[str, Any]] = []
     stats["rounds"] = trace
@@ -349,18 +347,18 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     full = dataclasses.replace(data)  # the query as asked (the loop tightens data.cap)
     best = None  # the best certified exact solution so far (certify)
     relaxed: float | None = None  # the relaxation's bound (MaxDisturbance: upper)
-    if ro.certify:  # every contact sticking, every actuator locked: one LP
+    if opts.certify:  # every contact sticking, every actuator locked: one LP
         t0 = time.perf_counter()
-        best = stuck_point(grasp, full, bounds, ro.normal_uncertainty, ro.motion_bound)
+        best = stuck_point(grasp, full, bounds, opts.normal_uncertainty, opts.motion_bound)
         _clock(stats, "certify_time_s", t0)
         stats["stuck"] = None if best is None else best[2]
         if best is not None and data.direction is None and data.command_range is None:
-            return _answer(method, grasp, query, stats, best, None, ro, data, cap0, True)
+            return _answer(method, grasp, query, stats, best, None, opts, data, cap0, True)
     try:
-        for _ in range(ro.max_rounds):
+        for _ in range(opts.max_rounds):
             exact = None if best is None else best[2]
             window = (exact, None) if data.direction is not None else (relaxed, exact)
-            rel, pt, var = _round(grasp, data, bounds, edges, ro, opts, stats, window)
+            rel, pt, var = _round(grasp, data, bounds, edges, opts, deadline, stats, window)
             row: dict[str, Any] = {"edges": [len(e) for e in edges], "feasible": pt is not None}
             trace.append(row)
             if pt is None and best is not None:  # nothing in the window: the box cut it off
@@ -386,30 +384,30 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
                                       opts.bound_factor)  # fmt: skip
                 bounds_stats(bounds, stats)
             cert = None
-            if ro.certify:
+            if opts.certify:
                 # the relaxation's bounds (the cap may have been tightened since), the
                 # query's own cap: an exact point beyond them shows that they cut it off
                 t0 = time.perf_counter()
                 cert = certify(grasp, full, rel.prob.bounds, rel.prob, pt.x, var,
-                               ro.normal_uncertainty, ro.motion_bound, row["value"],
-                               ro.certify_gap)  # fmt: skip
+                               opts.normal_uncertainty, opts.motion_bound, row["value"],
+                               opts.certify_gap)  # fmt: skip
                 _clock(stats, "certify_time_s", t0)
                 row["exact"] = None if cert is None else cert[2]
                 if cert is not None and (best is None or _better(cert[2], best[2], data)):
                     best = cert
                 if best is not None and _beyond(best[2], relaxed, data):
                     raise _BoxCut(best[2], relaxed)
-                if best is not None and _closed(best[2], relaxed, data, ro.certify_gap):
-                    return _answer(method, grasp, query, stats, best, relaxed, ro, data, cap0,
+                if best is not None and _closed(best[2], relaxed, data, opts.certify_gap):
+                    return _answer(method, grasp, query, stats, best, relaxed, opts, data, cap0,
                                    True)  # fmt: skip
             n = 0
-            if ro.refine:
-                n = rel.refine(pt, exact=None if cert is None else cert[1], depth=ro.levels + 1)
+            if opts.refine:
+                n = rel.refine(pt, exact=None if cert is None else cert[1], depth=opts.levels + 1)
             row["refined"] = n
             if n == 0:
                 break
         else:
-            stats["reason"] = f"max_rounds {ro.max_rounds} reached before the finest level"
+            stats["reason"] = f"max_rounds {opts.max_rounds} reached before the finest level"
             return _bracket(solution(method, grasp, query, None, stats, status="not_converged",
                                      conditions=conditions), best, relaxed, data)  # fmt: skip
     except Stop as e:
@@ -417,7 +415,7 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     stats["mip_rounds"] = len(trace)
     stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
     if best is not None:  # the finest level reached, the bracket still open: the exact point
-        return _answer(method, grasp, query, stats, best, relaxed, ro, data, cap0, False)
+        return _answer(method, grasp, query, stats, best, relaxed, opts, data, cap0, False)
     if data.direction is None and data.command_range is None:  # Existence
         stats["certified"] = False
         stats["reason"] = ("the relaxation is feasible at the finest level, but no exact "
@@ -428,10 +426,10 @@ def _solve(grasp: Grasp, query: Any, method: str, **options: Any) -> Solution:
     stats["cone_excess"] = rel.cone_excess(pt)
     stats["certified"] = False
     value = query_value(rel, pt, var, data)
-    if ro.certify:  # an optimisation query without an exact point: probe, or no answer
+    if opts.certify:  # an optimisation query without an exact point: probe, or no answer
         stats["relaxed_value"] = value
         if data.direction is not None:
-            got = _probe(grasp, query, data, relaxed, cap0, ro, asked, opts, stats)
+            got = _probe(grasp, query, data, relaxed, cap0, opts, deadline, stats)
             if got is not None:
                 return got
         stats["reason"] = (
@@ -467,7 +465,7 @@ _PROFILE_KEYS = (
 
 
 def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float | None,
-           cap0: float, ro: _Opts, asked: dict[str, Any], opts: MipOptions,
+           cap0: float, opts: RefinementOptions, deadline: Deadline,
            stats: dict[str, Any]) -> Solution | None:  # fmt: skip
     """A MaxDisturbance whose rounds found no exact point (the relaxation's modes admit
     none): ``Existence`` of the load ``base + s direction`` at the cap (when the bound
@@ -482,21 +480,21 @@ def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float 
     if relaxed is None:
         return None
     base = np.zeros_like(data.direction) if data.base is None else data.base
-    gap = max(ro.certify_gap, PROBE_GAP_FLOOR)
+    gap = max(opts.certify_gap, PROBE_GAP_FLOOR)
     top = min(relaxed, cap0)
     loads = [cap0] if relaxed >= cap0 * (1 - 1e-8) else []
     loads += [top * (1.0 - k * gap) for k in PROBE_BACKOFF if top * (1.0 - k * gap) > 0]
     tried: list[dict[str, Any]] = []
     stats["probes"] = tried
     for s in loads:
-        left = opts.remaining()
-        if left is not None and left <= 0.0:
+        if deadline.expired():
             break
-        sub = {**asked, "time_limit": left, "certify": True}
         check = Existence(base + s * data.direction, preload=query.preload,
                           commands=query.commands)  # fmt: skip
         t0 = time.perf_counter()
-        esol = _solve(grasp, check, "refinement", **sub)  # (an Existence never cuts its box:
+        esol = _solve(
+            grasp, check, replace(opts, certify=True), deadline
+        )  # (an Existence never cuts its box:
         # its first exact point answers it)
         tried.append({"load": s, "status": esol.status, "stable": esol.stable,
                       "time_s": time.perf_counter() - t0})  # fmt: skip
@@ -504,7 +502,7 @@ def _probe(grasp: Grasp, query: MaxDisturbance, data: QueryData, relaxed: float 
             if isinstance(esol.stats.get(k), int | float):
                 stats[k] = stats.get(k, 0) + esol.stats[k]
         if esol.stable:
-            stats["certified"] = _closed(s, relaxed, data, ro.certify_gap)
+            stats["certified"] = _closed(s, relaxed, data, opts.certify_gap)
             stats["cone_excess"] = 0.0
             stats["exact_value"] = s
             stats["capped"] = s >= cap0 * (1 - 1e-8)
@@ -571,7 +569,7 @@ def _closed(exact: float | None, relaxed: float | None, data: QueryData, gap: fl
 
 
 def _answer(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: tuple,
-            relaxed: float | None, ro: _Opts, data: QueryData, cap0: float,
+            relaxed: float | None, ro: RefinementOptions, data: QueryData, cap0: float,
             closed: bool) -> Solution:  # fmt: skip
     """The Solution of the best exact point (module docstring, "Certificates"); ``closed``:
     its value meets the relaxation's bound within ``certify_gap``."""
@@ -595,36 +593,35 @@ def _answer(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: 
     queries=(Existence, MaxDisturbance, OptimalCommands),
     planar=False,
     spatial=True,
+    options=RefinementOptions,
     hand=True,
     summary="thesis ch. 6: Coulomb friction with maximum dissipation, hierarchical refinement "
     "of a convex relaxation (infeasible at any level = unstable)",
 )
-def _solve_refinement(grasp: Grasp, query: Any, **options: Any) -> Solution:
+def _solve_refinement(grasp: Grasp, query: Any, opts: RefinementOptions,
+                      deadline: Deadline) -> Solution:  # fmt: skip
     # An exact point beyond the relaxation's bound means the model's box (force and motion
-    # bounds, bound_factor times the force scale) cut the optimum off: enlarge it tenfold,
-    # at most BOX_RETRIES times, within the same time limit.
-    t0 = time.perf_counter()
-    limit = options.get("time_limit")
-    # The box: REFINEMENT_BOUND_FACTOR times the force scale. Sliding and joint motions that
-    # load no spring are virtual and can be large, so a small box can cut the optimum off;
-    # a large one weakens the MIPs' relaxations (the measurements behind 1e3:
+    # bounds, bound_factor times the force scale) cut the optimum off: it grows tenfold.
+    # The default box, 1e3 times the force scale: sliding and joint motions that load no
+    # spring are virtual and can be large, so a small box can cut the optimum off; a large
+    # one weakens the MIPs' relaxations (the measurements behind 1e3:
     # docs/notebook/2026-11-28-exact-rechecks.md, "refinement's box").
-    options.setdefault("bound_factor", REFINEMENT_BOUND_FACTOR)
-    factor = float(options["bound_factor"])
     cuts: list[str] = []
-    for _ in range(BOX_RETRIES + 1):
+
+    def attempt(factor: float, prev: Solution | None) -> tuple[Solution | None, str | None]:
         try:
-            sol = _solve(grasp, query, "refinement", **options)
+            return _solve(grasp, query, replace(opts, bound_factor=factor), deadline), None
         except _BoxCut as e:
             cuts.append(f"bound_factor {factor:g}: {e}")
-            factor *= 10.0
-            options["bound_factor"] = factor
-            if limit is not None:
-                options["time_limit"] = max(0.0, float(limit) - (time.perf_counter() - t0))
-            continue
-        if cuts:
-            sol.stats["box_enlarged"] = cuts
-        return sol
-    return Solution(None, "refinement", grasp, query, status="error",
-                    stats={"message": "the model's box cut the optimum off at every bound "
-                           f"tried: {cuts}", "box_enlarged": cuts})  # fmt: skip
+            return None, str(e)
+
+    sol, notes = enlarge_box(attempt, opts.bound_factor, deadline, lambda prev, sol: None)
+    if sol is None:  # every box tried cut the optimum off, or no time was left to enlarge
+        timeout = deadline.expired()
+        return Solution(None, "refinement", grasp, query,
+                        status="timeout" if timeout else "error",
+                        stats={"message": "the model's box cut the optimum off at every bound "
+                               f"tried: {cuts}", "box_enlarged": notes})  # fmt: skip
+    if notes:
+        sol.stats["box_enlarged"] = notes
+    return sol

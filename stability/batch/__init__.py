@@ -22,13 +22,14 @@ cannot be read is reported with its row number. In Python::
 from .executors import BatchError, Executor, LocalExecutor, Outcome, RayExecutor, make_executor
 from .rows import RESULT_FIELDS, RowError, decode_row, encode_query, read_rows, result_row
 from .run import answered, run_batch, solve_row
-from .writers import map_rows, random_planar, random_rows, write_rows
+from .writers import MapPlane, map_rows, random_planar, random_rows, write_rows
 
 __all__ = [
     "RESULT_FIELDS",
     "BatchError",
     "Executor",
     "LocalExecutor",
+    "MapPlane",
     "Outcome",
     "RayExecutor",
     "RowError",

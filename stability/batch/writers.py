@@ -1,11 +1,12 @@
 """Query files from the inputs users have: random grasps (:mod:`stability.examples`), the
 directions of a resistible-force map, and any list of ``(grasp, query)`` pairs. Grasps read
-from MuJoCo scenes: :func:`ihm.batch.scene_map_rows` (the ``ihm`` layer)."""
+from MuJoCo scenes: :func:`ihm.sim_maps.scene_map_rows` (the ``ihm`` layer)."""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from ..maps import plane_axes
 from ..queries import Existence, MaxDisturbance, Query
 from .rows import encode_query
 
-__all__ = ["map_rows", "random_planar", "random_rows", "write_rows"]
+__all__ = ["MapPlane", "map_rows", "random_planar", "random_rows", "write_rows"]
 
 
 def write_rows(path: str | Path, rows: Iterable[dict[str, Any]]) -> int:
@@ -83,52 +84,74 @@ def random_rows(
     return rows
 
 
+@dataclass(frozen=True)
+class MapPlane:
+    """The directions of a resistible-force map as disturbance wrenches on a grasp.
+
+    ``directions`` unit forces at angles ``a_k = 2 pi k / directions`` [rad] from the
+    plane's first axis towards its second, ``u_k = cos(a_k) e_1 + sin(a_k) e_2`` (the
+    directions of :func:`stability.maps.resistible_forces`). ``rotation`` (spatial grasps
+    only): the object frame's orientation in the frame whose axes ``plane`` names (3 x 3,
+    object to world); the force ``u`` given in world axes is ``rotation^T u`` in the object
+    frame. Each force acts through ``torque_point`` [m, object frame; default its origin]:
+    a force ``f`` through ``p`` is the wrench ``(f, p x f)`` (planar: ``(f, p_x f_y - p_y
+    f_x)``)."""
+
+    plane: str = "xy"
+    directions: int = 36
+    torque_point: ArrayLike | None = None
+    rotation: ArrayLike | None = None
+
+    def wrenches(self, planar: bool) -> list[np.ndarray]:
+        """One disturbance wrench per direction, for a planar (3-vector wrenches) or a
+        spatial grasp (6-vectors); :class:`GraspError` for a plane, direction count or
+        rotation that does not fit the grasp."""
+        i, j = plane_axes(self.plane)
+        if planar and self.plane != "xy":
+            raise GraspError(f"a planar grasp has only the 'xy' force plane, got {self.plane!r}")
+        if int(self.directions) < 1:
+            raise GraspError(f"directions must be >= 1, got {self.directions}")
+        if self.rotation is not None and planar:
+            raise GraspError("rotation is for spatial grasps")
+        rot = None if self.rotation is None else np.asarray(self.rotation, dtype=float)
+        if rot is not None and rot.shape != (3, 3):
+            raise GraspError(f"rotation must be a 3 x 3 matrix, got shape {rot.shape}")
+        tp = self.torque_point
+        out = []
+        for a in np.linspace(0.0, 2 * np.pi, int(self.directions), endpoint=False):
+            f = np.zeros(2 if planar else 3)
+            f[i], f[j] = np.cos(a), np.sin(a)
+            if rot is not None:
+                f = rot.T @ f
+            if planar:
+                p = np.zeros(2) if tp is None else np.asarray(tp, float)
+                out.append(np.r_[f, p[0] * f[1] - p[1] * f[0]])
+            else:
+                p = np.zeros(3) if tp is None else np.asarray(tp, float)
+                out.append(np.r_[f, np.cross(p, f)])
+        return out
+
+
 def map_rows(
     grasp: Grasp,
+    where: MapPlane | None = None,
     *,
-    plane: str = "xy",
-    directions: int = 36,
     cap: float = 10.0,
     base: ArrayLike | None = None,
     commands: ArrayLike | None = None,
     preload: float | ArrayLike | None = None,
-    torque_point: ArrayLike | None = None,
-    rotation: ArrayLike | None = None,
     id_prefix: str = "dir",
     method: str | None = None,
     options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """One MaxDisturbance row per direction of a resistible-force map: ``directions`` forces
-    at angles ``2 pi k / directions`` from the plane's first axis towards its second (the
-    directions of :func:`stability.maps.resistible_forces`), each a unit force through
-    ``torque_point`` (default: the object-frame origin; a force ``f`` through ``p`` is the
-    wrench ``(f, p x f)``), on top of ``base`` (e.g. the object's weight). ``rotation``
-    (spatial grasps): the object frame's orientation in the frame whose axes the plane names
-    (3 x 3, object to world); the force ``u`` given in world axes is ``rotation^T u`` in the
-    object frame. Ids ``"<id_prefix>-<k>"``."""
-    i, j = plane_axes(plane)
-    if grasp.planar and plane != "xy":
-        raise GraspError(f"a planar grasp has only the 'xy' force plane, got {plane!r}")
-    if int(directions) < 1:
-        raise GraspError(f"directions must be >= 1, got {directions}")
-    if rotation is not None and grasp.planar:
-        raise GraspError("rotation is for spatial grasps")
-    rot = None if rotation is None else np.asarray(rotation, dtype=float)
-    if rot is not None and rot.shape != (3, 3):
-        raise GraspError(f"rotation must be a 3 x 3 matrix, got shape {rot.shape}")
-    angles = np.linspace(0.0, 2 * np.pi, int(directions), endpoint=False)
+    """One MaxDisturbance row per direction of a resistible-force map: the wrenches of
+    ``where`` (default ``MapPlane()``: 36 directions in the xy plane through the object-frame
+    origin), each searched up to ``cap`` on top of ``base`` (e.g. the object's weight), with
+    ``commands`` / ``preload`` as in :class:`stability.queries.MaxDisturbance`. Ids
+    ``"<id_prefix>-<k>"``."""
+    where = MapPlane() if where is None else where
     rows = []
-    for k, a in enumerate(angles):
-        f = np.zeros(2 if grasp.planar else 3)
-        f[i], f[j] = np.cos(a), np.sin(a)
-        if rot is not None:
-            f = rot.T @ f
-        if grasp.planar:
-            p = np.zeros(2) if torque_point is None else np.asarray(torque_point, float)
-            d = np.r_[f, p[0] * f[1] - p[1] * f[0]]
-        else:
-            p = np.zeros(3) if torque_point is None else np.asarray(torque_point, float)
-            d = np.r_[f, np.cross(p, f)]
+    for k, d in enumerate(where.wrenches(grasp.planar)):
         q = MaxDisturbance(direction=d, base=base, commands=commands, preload=preload, cap=cap)
         rows.append(encode_query(grasp, q, id=f"{id_prefix}-{k}", method=method, options=options))
     return rows

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -204,16 +204,17 @@ def exact_point(
 def certify(
     grasp: Grasp, data: QueryData, bounds: ExactBounds, relaxed: ExactProblem,
     x: NDArray[np.float64], var: int | None, eta: float, motion_bound: float,
-    target: float | None = None, gap: float = 0.0, steps: int = 8,
+    target: float | None = None, gap: float = 0.0,
 ) -> tuple[CoulombModel, ExactPoint, float | None] | None:  # fmt: skip
     """An exact solution near a relaxation's answer ``x`` (of ``relaxed``'s model, ``var``
     its query variable): each contact keeps the relaxation's mode (open; sliding; sticking)
     and the exact problem with those modes is solved for the query's optimum over the slide
-    directions (:func:`slide_search`, at most ``steps`` LP pairs, stopping early once the
-    value is within ``gap`` of ``target``, the relaxation's bound). Returns the exact model,
-    its point and query value, or None when no exact solution with those modes was found. A
-    certificate: Existence is then stable; a MaxDisturbance's value is a lower bound on the
-    exact optimum (the relaxation's an upper one); an OptimalCommands' an upper bound."""
+    directions (:func:`slide_search`, at most :data:`CERTIFY_STEPS` LP pairs, stopping
+    early once the value is within ``gap`` of ``target``, the relaxation's bound). Returns
+    the exact model, its point and query value, or None when no exact solution with those
+    modes was found. A certificate: Existence is then stable; a MaxDisturbance's value is a
+    lower bound on the exact optimum (the relaxation's an upper one); an OptimalCommands' an
+    upper bound."""
     ex = CoulombModel(grasp, data, bounds, eta, motion_bound)
     qvar = add_query(ex.prob, data)
     prob = ex.prob
@@ -231,7 +232,7 @@ def certify(
         y[qvar] = x[var]
     got = None
     for promote, source in CERTIFY_TRIES:  # the first that gives an exact point
-        got = slide_search(ex, y, target, gap, steps, promote=promote, source=source)
+        got = slide_search(ex, y, target, gap, CERTIFY_STEPS, promote=promote, source=source)
         if got is not None:
             break
     if got is None:
@@ -303,11 +304,55 @@ def slide_search(
     misalignment is below ``1e-9 (1 + B)``. The least-motion point of the best one
     (:meth:`ExactProblem.tidy`) is returned, checked against the exact conditions within
     ``1e-7 (1 + B)`` (motions unboxed); None if none was found."""
-    prob, g = ex.prob, ex.grasp
-    M = prob.model
-    c, dt = x[prob.c], x[ex.dt]
+    prob = ex.prob
+    search = _SlideSearch(ex, x, _read_modes(ex, x, promote, source), target, gap)
+    phi = {i: search.modes[i][1] for i in search.sliding}
+    cur = search.exact_lp(phi)
+    if cur is None:
+        return None
+    if search.rehint(cur.x):
+        cur = search.exact_lp(phi) or cur
+    search.best = cur if cur.misalignment <= search.feas else None
+    search.best_phi = dict(phi)
+    cur, phi = search.descend(cur, phi, steps)
+    search.restore(cur, phi)
+    search.refine_best()
+    if search.best is None:
+        return None
+    lp, xb = search.best.lp, search.best.x
+    for j in lp.elastic:  # the misalignment, below feas, is none
+        lp.lb[int(j)] = lp.ub[int(j)] = 0.0
+    n = prob.model.n_vars
+    y = prob.tidy(xb, lp=lp)
+    y = (xb if y is None else y)[:n]
+    if max(ex.violations(y, box=False).values()) > search.tol:
+        y = xb[:n]
+        if max(ex.violations(y, box=False).values()) > search.tol:
+            return None
+    return y
+
+
+def _mode_scales(ex: CoulombModel, x: NDArray[np.float64]) -> tuple[float, float]:
+    """``(dscale, fscale)``: the motion [m] and force [N] below which ``x``'s tangential
+    motions and contact forces count as zero, ``1e-7 (1 + max |.|)`` of each."""
+    c, dt = x[ex.prob.c], x[ex.dt]
     dscale = 1e-7 * (1.0 + float(np.abs(dt).max(initial=0.0)))
     fscale = 1e-7 * (1.0 + float(np.abs(c).max(initial=0.0)))
+    return dscale, fscale
+
+
+def _read_modes(
+    ex: CoulombModel, x: NDArray[np.float64], promote: bool, source: str
+) -> list[tuple[str, float]]:
+    """Each contact's mode in ``x`` with its angle [rad] (:func:`slide_search`): ``("open",
+    angle of d_t or nan)`` without normal force; ``("slide", angle of d_t)`` (or of
+    ``-c_t`` with ``source="force"``) where ``d_t`` is nonzero; ``("slide", angle of
+    -c_t)`` where ``promote`` and friction lies within :data:`PROMOTE_RTOL` of the cone;
+    else ``("stick", angle of c_t or 0)``, the friction hint of
+    :func:`inscribed_friction`."""
+    g = ex.grasp
+    c, dt = x[ex.prob.c], x[ex.dt]
+    dscale, fscale = _mode_scales(ex, x)
     modes: list[tuple[str, float]] = []
     for i in range(g.m):
         nt, nd = float(np.linalg.norm(c[i, 1:])), float(np.linalg.norm(dt[i]))
@@ -321,125 +366,162 @@ def slide_search(
             modes.append(("slide", math.atan2(-c[i, 2], -c[i, 1])))
         else:
             modes.append(("stick", math.atan2(c[i, 2], c[i, 1]) if nt > fscale else 0.0))
-    sliding = [i for i, (mode, _) in enumerate(modes) if mode == "slide"]
-    phi = {i: modes[i][1] for i in sliding}
-    has_obj = bool(np.any(M.objective))
-    sign = 1.0 if M.maximize else -1.0
-    tol = 1e-7 * (1.0 + ex.prob.bounds.force)
-    feas = 1e-9 * (1.0 + ex.prob.bounds.force)  # misalignment [N] taken as none
+    return modes
 
-    def exact_lp(angles: dict[int, float]) -> tuple[Any, NDArray[np.float64], float, float] | None:
-        """(LP, point, objective (larger is better), misalignment) at ``angles``."""
-        lp = _modes_lp(ex, x, modes, angles, elastic=ELASTIC_PENALTY)
+
+class _ModePoint(NamedTuple):
+    """The optimum of :func:`_modes_lp` (elastic) at fixed slide angles."""
+
+    lp: Any  # the LP solved
+    x: NDArray[np.float64]  # its optimum (the LP's variables, the model's first)
+    value: float  # the query's objective, larger is better (0 for Existence)
+    misalignment: float  # sum of the elastic friction misalignments [N]
+
+    def merit(self) -> float:
+        """``value - ELASTIC_PENALTY * misalignment``: what a trust-region step must not
+        make worse."""
+        return self.value - ELASTIC_PENALTY * self.misalignment
+
+
+class _SlideSearch:
+    """The state of one :func:`slide_search`: the contacts' ``modes`` (sticking contacts'
+    friction hints move, :meth:`rehint`), the best exact point so far (``best``, at slide
+    angles ``best_phi``) and the tolerances: ``feas`` [N], the misalignment taken as none,
+    ``1e-9 (1 + B)``; ``tol``, the exact conditions' ``1e-7 (1 + B)``."""
+
+    def __init__(
+        self, ex: CoulombModel, x: NDArray[np.float64], modes: list[tuple[str, float]],
+        target: float | None, gap: float,
+    ) -> None:  # fmt: skip
+        M = ex.prob.model
+        self.ex, self.x, self.modes, self.target, self.gap = ex, x, modes, target, gap
+        self.sliding = [i for i, (mode, _) in enumerate(modes) if mode == "slide"]
+        self.fscale = _mode_scales(ex, x)[1]
+        self.has_obj = bool(np.any(M.objective))
+        self.sign = 1.0 if M.maximize else -1.0
+        self.tol = 1e-7 * (1.0 + ex.prob.bounds.force)
+        self.feas = 1e-9 * (1.0 + ex.prob.bounds.force)  # misalignment [N] taken as none
+        self.best: _ModePoint | None = None
+        self.best_phi: dict[int, float] = {}
+
+    def exact_lp(self, angles: dict[int, float]) -> _ModePoint | None:
+        """The elastic mode LP's optimum at slide angles ``angles``; None if it has none."""
+        M = self.ex.prob.model
+        lp = _modes_lp(self.ex, self.x, self.modes, angles, elastic=ELASTIC_PENALTY)
         res = mip_solve(lp, backend="highs", polish=False)
         if res.status != "optimal" or res.x is None:
             return None
         mis = float(np.sum(res.x[lp.elastic])) if lp.elastic else 0.0
-        val = sign * M.objective_value(res.x[: M.n_vars]) if has_obj else 0.0
-        return lp, res.x, val, mis
+        val = self.sign * M.objective_value(res.x[: M.n_vars]) if self.has_obj else 0.0
+        return _ModePoint(lp, res.x, val, mis)
 
-    def merit(got: tuple) -> float:
-        return got[2] - ELASTIC_PENALTY * got[3]
-
-    def done(got: tuple | None) -> bool:
-        if got is None or got[3] > feas:
+    def done(self, got: _ModePoint | None) -> bool:
+        """``got`` is exact and (with a target) within ``gap`` of it."""
+        if got is None or got.misalignment > self.feas:
             return False
-        if target is None or not has_obj:
+        if self.target is None or not self.has_obj:
             return True
-        return got[2] >= sign * target - gap * (1.0 + abs(target)) - 1e-12
+        t = self.target
+        return got.value >= self.sign * t - self.gap * (1.0 + abs(t)) - 1e-12
 
-    def rehint(point: NDArray[np.float64]) -> bool:
+    def keep(self, got: _ModePoint, phi: dict[int, float]) -> None:
+        """``got`` (at angles ``phi``) as the best point when exact and no worse."""
+        if got.misalignment <= self.feas and (self.best is None or got.value >= self.best.value):
+            self.best, self.best_phi = got, dict(phi)
+
+    def rehint(self, point: NDArray[np.float64]) -> bool:
         """Centre the fine polygon vertices of each sticking contact whose friction lies on
         its polygon's boundary at that friction's direction (the relaxation's hint was only
         a guess: an inscribed polygon loses up to 1 - cos(pi / 32) of the cone away from
         its fine vertices); True if any moved."""
+        prob, g = self.ex.prob, self.ex.grasp
         moved = False
-        for i, (mode, hint) in enumerate(modes):
+        for i, (mode, hint) in enumerate(self.modes):
             ct, cn = point[prob.c[i, 1:]], float(point[prob.c[i, 0]])
-            if mode != "stick" or cn <= fscale:
+            if mode != "stick" or cn <= self.fscale:
                 continue
             if np.linalg.norm(ct) >= (1.0 - 1e-3) * float(g.mu[i]) * cn:
                 a = math.atan2(ct[1], ct[0])
                 if abs(math.remainder(a - hint, 2.0 * math.pi)) > STICK_FINE[1]:
-                    modes[i] = ("stick", a)
+                    self.modes[i] = ("stick", a)
                     moved = True
         return moved
 
-    cur = exact_lp(phi)
-    if cur is None:
-        return None
-    if rehint(cur[1]):
-        cur = exact_lp(phi) or cur
-    best = cur if cur[3] <= feas else None
-    best_phi = dict(phi)
-    rho = 0.05
-    for _ in range(steps if sliding else 0):
-        if done(best):
-            break
-        ref = cur[1]
-        lin = {i: (float(ref[prob.c[i, 0]]), float(np.linalg.norm(ref[ex.dt[i]]))) for i in sliding}
-        lp = _modes_lp(ex, x, modes, phi, lin, rho)
-        res = mip_solve(lp, backend="highs", polish=False)
-        if res.status != "optimal" or res.x is None:
-            rho /= 4.0
-            if rho < 1e-9:
+    def linearised_lp(
+        self, ref: NDArray[np.float64], phi: dict[int, float], rho: float, restore: bool
+    ) -> tuple[Any, Any]:
+        """The mode LP linearised in the angle steps ``delta`` (``|delta| <= rho``) about
+        the point ``ref`` at angles ``phi``, and its solution; ``restore``: least
+        ``sum |delta|`` instead of the query's objective."""
+        prob, dt = self.ex.prob, self.ex.dt
+        lin = {i: (float(ref[prob.c[i, 0]]), float(np.linalg.norm(ref[dt[i]])))
+               for i in self.sliding}  # fmt: skip
+        lp = _modes_lp(self.ex, self.x, self.modes, phi, lin, rho, restore=restore)
+        return lp, mip_solve(lp, backend="highs", polish=False)
+
+    def descend(
+        self, cur: _ModePoint, phi: dict[int, float], steps: int
+    ) -> tuple[_ModePoint, dict[int, float]]:
+        """At most ``steps`` trust-region steps of sequential linear programming on the
+        slide angles from ``cur`` (at ``phi``), stopping once :meth:`done`; the last
+        accepted point and its angles."""
+        rho = 0.05
+        for _ in range(steps if self.sliding else 0):
+            if self.done(self.best):
                 break
-            continue
-        delta = {i: float(res.x[j]) for i, j in lp.deltas.items()}
-        trial = {i: phi[i] + delta[i] for i in sliding}
-        got = exact_lp(trial)
-        if got is not None and merit(got) >= merit(cur) - 1e-12 * (1.0 + abs(merit(cur))):
-            cur, phi = got, trial
-            if rehint(cur[1]):
-                cur = exact_lp(phi) or cur
-            if cur[3] <= feas and (best is None or cur[2] >= best[2]):
-                best, best_phi = cur, dict(phi)
-            rho = min(4.0 * rho, 0.5)
-        else:
-            rho /= 4.0
-        if rho < 1e-9 or max(abs(v) for v in delta.values()) < 1e-12:
-            break
-    # restoration: Newton steps onto the exact modes' manifold (least angle change that
-    # aligns friction to first order), from the best point in merit; quadratic convergence
-    start = cur
-    for _ in range(RESTORE_STEPS if sliding else 0):
-        if start[3] <= feas:
-            break
-        ref = start[1]
-        lin = {i: (float(ref[prob.c[i, 0]]), float(np.linalg.norm(ref[ex.dt[i]]))) for i in sliding}
-        lp = _modes_lp(ex, x, modes, phi, lin, 0.5, restore=True)
-        res = mip_solve(lp, backend="highs", polish=False)
-        if res.status != "optimal" or res.x is None:
-            break
-        trial = {i: phi[i] + float(res.x[j]) for i, j in lp.deltas.items()}
-        got = exact_lp(trial)
-        if got is None or got[3] >= start[3]:
-            break
-        start, phi = got, trial
-        if got[3] <= feas and (best is None or got[2] >= best[2]):
-            best, best_phi = got, dict(phi)
-    for _ in range(3):  # the best point's sticking friction on its polygon: finer there
-        if best is None or not rehint(best[1]):
-            break
-        got = exact_lp(best_phi)
-        if got is None or got[3] > feas or got[2] < best[2]:
-            break
-        best = got
-    if best is None:
-        return None
-    lp, xb, _, _ = best
-    for j in lp.elastic:  # the misalignment, below feas, is none
-        lp.lb[int(j)] = lp.ub[int(j)] = 0.0
-    y = ex.prob.tidy(xb, lp=lp)
-    y = (xb if y is None else y)[: M.n_vars]
-    if max(ex.violations(y, box=False).values()) > tol:
-        y = xb[: M.n_vars]
-        if max(ex.violations(y, box=False).values()) > tol:
-            return None
-    return y
+            lp, res = self.linearised_lp(cur.x, phi, rho, restore=False)
+            if res.status != "optimal" or res.x is None:
+                rho /= 4.0
+                if rho < 1e-9:
+                    break
+                continue
+            delta = {i: float(res.x[j]) for i, j in lp.deltas.items()}
+            trial = {i: phi[i] + delta[i] for i in self.sliding}
+            got = self.exact_lp(trial)
+            if got is not None and got.merit() >= cur.merit() - 1e-12 * (1.0 + abs(cur.merit())):
+                cur, phi = got, trial
+                if self.rehint(cur.x):
+                    cur = self.exact_lp(phi) or cur
+                self.keep(cur, phi)
+                rho = min(4.0 * rho, 0.5)
+            else:
+                rho /= 4.0
+            if rho < 1e-9 or max(abs(v) for v in delta.values()) < 1e-12:
+                break
+        return cur, phi
+
+    def restore(self, start: _ModePoint, phi: dict[int, float]) -> None:
+        """Newton steps onto the exact modes' manifold (least angle change that aligns
+        friction to first order) from ``start`` (at ``phi``), at most
+        :data:`RESTORE_STEPS`, while the misalignment falls; quadratic convergence."""
+        for _ in range(RESTORE_STEPS if self.sliding else 0):
+            if start.misalignment <= self.feas:
+                break
+            lp, res = self.linearised_lp(start.x, phi, 0.5, restore=True)
+            if res.status != "optimal" or res.x is None:
+                break
+            trial = {i: phi[i] + float(res.x[j]) for i, j in lp.deltas.items()}
+            got = self.exact_lp(trial)
+            if got is None or got.misalignment >= start.misalignment:
+                break
+            start, phi = got, trial
+            self.keep(got, phi)
+
+    def refine_best(self) -> None:
+        """The best point's sticking friction on its polygon: the fine vertices moved
+        there (:meth:`rehint`) and the LP solved again, kept while exact and no worse (at
+        most 3 times)."""
+        for _ in range(3):
+            if self.best is None or not self.rehint(self.best.x):
+                break
+            got = self.exact_lp(self.best_phi)
+            if got is None or got.misalignment > self.feas or got.value < self.best.value:
+                break
+            self.best = got
 
 
 RESTORE_STEPS = 4
+CERTIFY_STEPS = 8  # certify's slide_search steps (LP pairs) per mode transfer
 # certify's mode transfers, in order (slide_search's promote, source): the relaxation's own
 # modes and slide directions; slides along friction; and contacts stuck at the cone's edge
 # sliding. Later ones run only where the earlier found no exact point.
@@ -558,8 +640,7 @@ def mode_lp(ex: CoulombModel, x: NDArray[np.float64], source: str) -> tuple[Any,
     M = prob.model
     lp = M.fixed(x)
     c, dt = x[prob.c], x[ex.dt]
-    dscale = 1e-7 * (1.0 + float(np.abs(dt).max(initial=0.0)))
-    fscale = 1e-7 * (1.0 + float(np.abs(c).max(initial=0.0)))
+    dscale, fscale = _mode_scales(ex, x)
 
     def slide(i: int, u: NDArray[np.float64]) -> None:  # d_t = sigma u, s = sigma >= 0
         sig = lp.add_var(0.0, INF, "C", f"sigma{i}")

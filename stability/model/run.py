@@ -5,17 +5,15 @@ within the deadline, checked against the model's exact conditions (:func:`run`),
 
 from __future__ import annotations
 
-import math
-import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import mip
-from ..errors import GraspError
 from ..grasp import Grasp
+from ..options import Deadline, MethodOptions, check_ranges, finite
 from ..queries import Query
 from ..solution import Solution
 from .problem import ExactBounds, ExactPoint, ExactProblem
@@ -32,6 +30,9 @@ CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND
 DEFAULT_BACKENDS = {"no_mdp": "highs", "iterative": "scip", "refinement": "scip"}
 
 
+_M = TypeVar("_M", bound="MipOptions")
+
+
 def default_backend(method: str) -> str:
     """The measured faster backend for ``method`` if installed, else any installed one."""
     want = DEFAULT_BACKENDS.get(method, mip.DEFAULT_BACKEND)
@@ -39,8 +40,8 @@ def default_backend(method: str) -> str:
     return want if want in have or not have else have[0]
 
 
-@dataclass
-class MipOptions:
+@dataclass(frozen=True)
+class MipOptions(MethodOptions):
     """Options of every MIP method: ``backend`` (``"highs"``, ``"scip"`` or, with ``gurobipy``
     installed, ``"gurobi"``; default: the method's measured faster one,
     :data:`DEFAULT_BACKENDS`; checked by :func:`stability.mip.check_backend`), ``time_limit``
@@ -56,39 +57,23 @@ class MipOptions:
 
     def __post_init__(self) -> None:
         if self.backend is None:
-            self.backend = mip.DEFAULT_BACKEND
-        mip.check_backend(self.backend)
-        if self.time_limit is not None:
-            try:
-                t = float(self.time_limit)
-            except (TypeError, ValueError) as exc:
-                raise GraspError(f"time_limit must be seconds, got {self.time_limit!r}") from exc
-            if not (math.isfinite(t) and t >= 0):
-                raise GraspError(f"time_limit must be finite and >= 0 s, got {self.time_limit!r}")
-            self.time_limit = t
-        if not isinstance(self.edges, int | np.integer) or self.edges < 3:
-            raise GraspError(f"edges must be an integer >= 3, got {self.edges!r}")
-        self.deadline = None if self.time_limit is None else time.perf_counter() + self.time_limit
+            object.__setattr__(self, "backend", mip.DEFAULT_BACKEND)
+        super().__post_init__()
 
     @classmethod
-    def of(cls, method: str, options: dict[str, Any]) -> MipOptions:
-        """Options from ``solve(..., **options)``; an unknown name is a GraspError. The
-        default backend is the method's (:data:`DEFAULT_BACKENDS`)."""
-        known = set(cls.__dataclass_fields__)
-        bad = sorted(set(options) - known)
-        if bad:
-            raise GraspError(f"unknown option(s) for method {method!r}: {bad}; known: "
-                             f"{sorted(known)}")  # fmt: skip
-        options = dict(options)
+    def of(cls: type[_M], method: str, options: dict[str, Any]) -> _M:
+        """:meth:`MethodOptions.of`, the backend defaulting to the method's
+        (:data:`DEFAULT_BACKENDS`)."""
         if options.get("backend") is None:
-            options["backend"] = default_backend(method)
-        return cls(**options)
+            options = {**options, "backend": default_backend(method)}
+        return super().of(method, options)
 
-    def remaining(self) -> float | None:
-        """Seconds left before the deadline (None: no limit; 0 when passed)."""
-        if self.deadline is None:
-            return None
-        return max(0.0, self.deadline - time.perf_counter())
+    def check(self) -> None:
+        super().check()
+        mip.check_backend(self.backend)
+        check_ranges(self, {"edges": (self.edges >= 3, "an integer >= 3"),
+                            "bound_factor": (finite(self.bound_factor) and self.bound_factor
+                                             >= 1.0, "a finite number >= 1")})  # fmt: skip
 
 
 class Stop(Exception):
@@ -99,9 +84,11 @@ class Stop(Exception):
         self.status, self.message = status, message
 
 
-def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> ExactPoint | None:
-    """Solve ``problem.model``; the point, None when infeasible; :class:`Stop` otherwise."""
-    left = opts.remaining()
+def run(problem: ExactProblem, opts: MipOptions, deadline: Deadline,
+        stats: dict[str, Any]) -> ExactPoint | None:  # fmt: skip
+    """Solve ``problem.model`` within ``deadline``; the point, None when infeasible;
+    :class:`Stop` otherwise."""
+    left = deadline.remaining()
     if left is not None and left <= 0.0:
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
     gap = 1e-9 if problem.model.gap is None else problem.model.gap
@@ -114,7 +101,7 @@ def run(problem: ExactProblem, opts: MipOptions, stats: dict[str, Any]) -> Exact
         # infeasible round ends a query ("unstable"), so that claim is checked once more
         # without presolve; feasible answers need no second look (they are certified).
         problem.model.presolve = False
-        left = opts.remaining()
+        left = deadline.remaining()
         if left is not None and left <= 0.0:
             raise Stop("timeout", f"time_limit {opts.time_limit} s reached")
         try:

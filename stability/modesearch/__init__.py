@@ -70,7 +70,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -83,6 +83,7 @@ from ..model.coulomb import CoulombModel, exact_conditions
 from ..model.problem import ExactBounds, length_scale, scale_bounds
 from ..model.query import QueryData, add_query, query_value
 from ..model.run import bounds_stats, solution
+from ..options import BOX_RETRIES, Deadline, MethodOptions, check_ranges, enlarge_box, finite
 from ..queries import Existence, MaxDisturbance, OptimalCommands
 from ..solution import Solution
 from .node import NodeLP
@@ -91,13 +92,12 @@ from .search import Search
 __all__ = ["MODESEARCH_BOUND_FACTOR", "ModeSearchOptions"]
 
 MODESEARCH_BOUND_FACTOR = 1e3  # the default box, times the query's force scale
-BOX_RETRIES = 2  # tenfold enlargements of the box when an exact point shows it cut
 RETRY_NODE_FACTOR = 5  # a larger box's search may take this many times the nodes before it
 RETRY_NODE_SLACK = 1000  # ... plus these
 
 
-@dataclass
-class ModeSearchOptions:
+@dataclass(frozen=True)
+class ModeSearchOptions(MethodOptions):
     """Options of ``method="modesearch"``.
 
     ``time_limit`` [s] (None: none); ``gap``: relative width at which a bracket is closed
@@ -106,7 +106,9 @@ class ModeSearchOptions:
     by the direction's force for MaxDisturbance), default 1e-6, so that a value near zero
     closes too; ``bound_factor``: the box (module docstring); ``motion_bound``: the motions'
     box per ``2 B`` (as ``exact``); ``min_width`` [rad]: arcs narrower than this are not
-    split; ``node_limit``: nodes before the search stops (``status="not_converged"``)."""
+    split; ``node_limit``: nodes before the search stops (``status="not_converged"``);
+    ``normal_uncertainty``: 0 only (the search has exact normals; ``refinement`` and
+    ``exact`` take an uncertainty)."""
 
     time_limit: float | None = None
     gap: float = 1e-4
@@ -115,36 +117,23 @@ class ModeSearchOptions:
     motion_bound: float = 4.0
     min_width: float = 1e-6
     node_limit: int = 1_000_000
+    normal_uncertainty: float = 0.0
 
-    @classmethod
-    def of(cls, options: dict[str, Any]) -> ModeSearchOptions:
-        """From ``solve(..., **options)``; GraspError naming an unknown or bad option."""
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(options) - known)
-        if bad:
-            raise GraspError(f"unknown option(s) for method 'modesearch': {bad}; known: "
-                             f"{sorted(known)}")  # fmt: skip
-        o = cls(**options)
-        checks = [
-            ("time_limit", o.time_limit is None or (_finite(o.time_limit) and o.time_limit >= 0)),
-            ("gap", _finite(o.gap) and 0.0 <= o.gap < 1.0),
-            ("abs_gap", _finite(o.abs_gap) and 0.0 <= o.abs_gap < 1.0),
-            ("bound_factor", _finite(o.bound_factor) and o.bound_factor >= 1.0),
-            ("motion_bound", _finite(o.motion_bound) and o.motion_bound >= 1.0),
-            ("min_width", _finite(o.min_width) and 0.0 < o.min_width < 1.0),
-            ("node_limit", isinstance(o.node_limit, int | np.integer) and o.node_limit >= 1),
-        ]
-        for name, ok in checks:
-            if not ok:
-                raise GraspError(f"modesearch option {name}={getattr(o, name)!r} is out of range")
-        return o
-
-
-def _finite(v: Any) -> bool:
-    try:
-        return math.isfinite(float(v))
-    except (TypeError, ValueError):
-        return False
+    def check(self) -> None:
+        super().check()
+        if self.normal_uncertainty != 0.0:
+            raise GraspError("modesearch has no normal_uncertainty: use method='refinement'")
+        check_ranges(self, {
+            "gap": (finite(self.gap) and 0.0 <= self.gap < 1.0, "in [0, 1)"),
+            "abs_gap": (finite(self.abs_gap) and 0.0 <= self.abs_gap < 1.0, "in [0, 1)"),
+            "bound_factor": (finite(self.bound_factor) and self.bound_factor >= 1.0,
+                             "a finite number >= 1"),
+            "motion_bound": (finite(self.motion_bound) and self.motion_bound >= 1.0,
+                             "a finite number >= 1"),
+            "min_width": (finite(self.min_width) and 0.0 < self.min_width < 1.0,
+                          "in (0, 1) rad"),
+            "node_limit": (self.node_limit >= 1, "a positive integer"),
+        })  # fmt: skip
 
 
 def _abs_tol(data: QueryData, bounds: ExactBounds, grasp: Grasp, opts: ModeSearchOptions) -> float:
@@ -181,7 +170,8 @@ def _box_reached(ex: CoulombModel, x: NDArray[np.float64]) -> bool:
     return False
 
 
-def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float) -> Solution:
+def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions,
+                deadline: Deadline) -> Solution:  # fmt: skip
     """One search in the box of ``opts.bound_factor``. Where the box may have cut the
     optimum off, the answer keeps its exact point and has no proven bound
     (``stats["box_reached"]`` says why)."""
@@ -196,8 +186,7 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions, t0: float) ->
     qvar = add_query(ex.prob, data)
     lp = NodeLP(ex, data)
     stats["build_time_s"] = time.perf_counter() - tb
-    deadline = None if opts.time_limit is None else t0 + float(opts.time_limit)
-    search = Search(lp, opts, data, qvar, deadline, abs_tol)
+    search = Search(lp, opts, data, qvar, deadline.at(), abs_tol)
     existence = data.direction is None and data.command_range is None
     # a first exact point: every contact sticking, every actuator locked (one LP)
     tp = time.perf_counter()
@@ -310,39 +299,30 @@ def _answer(grasp: Grasp, query: Any, stats: dict[str, Any], ex: CoulombModel,
     queries=(Existence, MaxDisturbance, OptimalCommands),
     planar=False,
     spatial=True,
+    options=ModeSearchOptions,
     hand=True,
     summary="Coulomb friction with maximum dissipation by one branch-and-bound tree over "
     "contact modes and slide arcs, one LP per node (exact points, proven brackets)",
 )
-def _solve_modesearch(grasp: Grasp, query: Any, **options: Any) -> Solution:
-    if options.get("normal_uncertainty"):
-        raise GraspError("modesearch has no normal_uncertainty: use method='refinement'")
-    options.pop("normal_uncertainty", None)
-    opts = ModeSearchOptions.of(options)
-    t0 = time.perf_counter()
-    factor = opts.bound_factor
-    cuts: list[str] = []
-    prev: Solution | None = None
-    for k in range(BOX_RETRIES + 1):
-        left = None if opts.time_limit is None else opts.time_limit - (time.perf_counter() - t0)
-        limit = None if left is None else max(0.0, left)
+def _solve_modesearch(grasp: Grasp, query: Any, opts: ModeSearchOptions,
+                      deadline: Deadline) -> Solution:  # fmt: skip
+    def attempt(factor: float, prev: Solution | None) -> tuple[Solution, str | None]:
         nodes = opts.node_limit
-        if prev is not None:
+        if prev is not None:  # a larger box's search may take a few times the nodes
             nodes = min(nodes, RETRY_NODE_FACTOR * int(prev.stats["nodes"]) + RETRY_NODE_SLACK)
-        o = replace(opts, bound_factor=factor, time_limit=limit, node_limit=nodes)
-        sol = _solve_once(grasp, query, o, time.perf_counter())
-        if prev is not None and sol.status in ("timeout", "not_converged"):
-            cuts.append(f"bound_factor {factor:g}: {sol.status} ({sol.stats['nodes']} nodes); "
-                        f"the answer of bound_factor {factor / 10:g} is kept")  # fmt: skip
-            sol = prev
-            break
-        cut = sol.stats.get("box_reached")
-        if cut is None or k == BOX_RETRIES or (prev is not None and _converged(prev, sol, opts)):
-            break
-        cuts.append(f"bound_factor {factor:g}: {cut}")
-        prev, factor = sol, factor * 10.0
-    if cuts:
-        sol.stats["box_enlarged"] = cuts
+        o = replace(opts, bound_factor=factor, node_limit=nodes)
+        sol = _solve_once(grasp, query, o, deadline)
+        converged = prev is not None and _converged(prev, sol, opts)
+        return sol, None if converged else sol.stats.get("box_reached")
+
+    def keep(prev: Solution, sol: Solution) -> str | None:
+        if sol.status in ("timeout", "not_converged"):
+            return f"{sol.status} ({sol.stats['nodes']} nodes)"
+        return None
+
+    sol, notes = enlarge_box(attempt, opts.bound_factor, deadline, keep, BOX_RETRIES)
+    if notes:
+        sol.stats["box_enlarged"] = notes
     return sol
 
 

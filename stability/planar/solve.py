@@ -7,14 +7,15 @@ largest stable ``s`` in ``[0, cap]``). Option: ``chunk`` (states per batch, defa
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..api import register
-from ..errors import GraspError
 from ..grasp import Grasp
+from ..options import Deadline, MethodOptions, check_ranges
 from ..queries import Existence, MaxDisturbance, checked_base, checked_direction_cap
 from ..solution import Solution
 from .enumeration import preload_vector
@@ -29,13 +30,26 @@ from .system import (
     state_names,
 )
 
-__all__ = ["planar_options", "unit_grasp"]
+__all__ = ["PlanarOptions", "unit_grasp"]
 
 
-def _solution(grasp, query, ctx, S, P, r, ct, s, stable, value, stats) -> Solution:
+def _solution(
+    grasp: Grasp,
+    query: Existence | MaxDisturbance,
+    ctx: Context,
+    state: tuple[NDArray[np.int8], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]],
+    value: float | None,
+    stats: dict[str, Any],
+) -> Solution:
+    """The stable answer of a certified contact state ``state = (S, P, r, c_t)``: its slip
+    signs ``S`` (0: rolling) and persisting contacts ``P`` (:mod:`~stability.planar.system`),
+    the object motion ``r`` and the rolling contacts' tangential forces ``c_t``, from which
+    the contact forces follow; ``value`` the largest stable ``s`` (MaxDisturbance) or None
+    (Existence)."""
+    S, P, r, ct = state
     c = contact_forces(ctx, S[None], P[None], r[None], ct[None])[0]
     return Solution(
-        stable=stable,
+        stable=True,
         method="planar",
         grasp=grasp,
         query=query,
@@ -47,15 +61,28 @@ def _solution(grasp, query, ctx, S, P, r, ct, s, stable, value, stats) -> Soluti
     )
 
 
+@dataclass(frozen=True)
+class PlanarOptions(MethodOptions):
+    """Options of ``method="planar"``: ``chunk``, the states enumerated per batch (memory
+    against vectorisation; the answer does not depend on it)."""
+
+    chunk: int = 8192
+
+    def check(self) -> None:
+        check_ranges(self, {"chunk": (self.chunk >= 1, "a positive integer")})
+
+
 @register(
     "planar",
     queries=(Existence, MaxDisturbance),
     planar=True,
     spatial=False,
+    options=PlanarOptions,
     summary="thesis ch. 4: exact, polynomial-time enumeration of co-occurring states",
 )
-def _solve_planar(grasp: Grasp, query: Existence | MaxDisturbance, **options: Any) -> Solution:
-    chunk = planar_options(options)
+def _solve_planar(grasp: Grasp, query: Existence | MaxDisturbance, opts: PlanarOptions,
+                  deadline: Deadline) -> Solution:  # fmt: skip
+    chunk = opts.chunk
     p = preload_vector(grasp, query.preload)
     # Work in units where the grasp has size 1: the model is invariant under
     # points -> points / L with torques / L and rotations * L, and tolerances
@@ -73,16 +100,6 @@ def _solve_planar(grasp: Grasp, query: Existence | MaxDisturbance, **options: An
     if sol.motion is not None:
         sol.motion = sol.motion * scale  # theta = theta_unit / L
     return sol
-
-
-def planar_options(options: dict[str, Any]) -> int:
-    """The planar method's options: ``chunk`` (states per batch, default 8192)."""
-    chunk = options.pop("chunk", 8192)
-    if options:
-        raise GraspError(f"unknown option(s) for method 'planar': {sorted(options)}")
-    if not isinstance(chunk, int | np.integer) or chunk < 1:
-        raise GraspError(f"option chunk must be a positive integer, got {chunk!r}")
-    return int(chunk)
 
 
 def unit_grasp(grasp: Grasp) -> tuple[float, Grasp]:
@@ -107,9 +124,7 @@ def _existence(grasp, query, p, w, chunk) -> Solution:
         for k in np.flatnonzero(ok):
             if certified(ctx, S[k], P[k], r0[k], ct0[k], 0.0):
                 stats = {"states": n_states, "lps": n_lp}
-                return _solution(
-                    grasp, query, ctx, S[k], P[k], r0[k], ct0[k], 0.0, True, None, stats
-                )
+                return _solution(grasp, query, ctx, (S[k], P[k], r0[k], ct0[k]), None, stats)
             n_rejected += 1
         for k in np.flatnonzero(lp):
             n_lp += 1
@@ -117,7 +132,7 @@ def _existence(grasp, query, p, w, chunk) -> Solution:
             if res is not None and certified(ctx, S[k], P[k], res[0], res[1], 0.0):
                 r, ct, _ = res
                 stats = {"states": n_states, "lps": n_lp}
-                return _solution(grasp, query, ctx, S[k], P[k], r, ct, 0.0, True, None, stats)
+                return _solution(grasp, query, ctx, (S[k], P[k], r, ct), None, stats)
     return Solution(
         stable=False,
         method="planar",
@@ -164,5 +179,4 @@ def _max_disturbance(grasp, query, p, d, cap, chunk, base=None) -> Solution:
         )
     value = float(min(best[0], cap))
     stats["capped"] = bool(value >= cap * (1 - 1e-12))
-    S, P, r, ct = best[1]
-    return _solution(grasp, query, ctx, S, P, r, ct, value, True, value, stats)
+    return _solution(grasp, query, ctx, best[1], value, stats)

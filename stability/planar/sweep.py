@@ -17,7 +17,7 @@ from ..errors import GraspError, MethodError
 from ..grasp import Grasp
 from ..queries import MaxDisturbance, checked_base, checked_direction_cap
 from .enumeration import preload_vector, require_planar
-from .solve import planar_options, unit_grasp
+from .solve import PlanarOptions, unit_grasp
 from .system import (
     CACHE_PRELOADS,
     Context,
@@ -430,7 +430,7 @@ def max_disturbance_map(
     reason = method_info("planar").refuses(grasp, query)
     if reason is not None:
         raise MethodError(f"method 'planar' {reason}")
-    chunk = planar_options(dict(options))
+    chunk = PlanarOptions.of("planar", dict(options)).chunk
     _, cap_f = checked_direction_cap(grasp, query)
     w0 = checked_base(grasp, query)
     p = preload_vector(grasp, preload)

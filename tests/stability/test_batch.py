@@ -21,6 +21,7 @@ from stability import Existence, GraspError, MaxDisturbance, solve
 from stability.batch import (
     BatchError,
     LocalExecutor,
+    MapPlane,
     RayExecutor,
     decode_row,
     encode_query,
@@ -276,7 +277,7 @@ def test_map_rows_answer_what_resistible_forces_answers(tmp_path: Path) -> None:
     """The directions of a map as a batch give the map that stability.maps computes."""
     g = random_planar(np.random.default_rng(11), 3)
     base = [0.0, -0.5, 0.0]
-    rows = map_rows(g, directions=16, cap=5.0, base=base, method="planar")
+    rows = map_rows(g, MapPlane(directions=16), cap=5.0, base=base, method="planar")
     q = write_rows(tmp_path / "q.jsonl", rows) and tmp_path / "q.jsonl"
     with LocalExecutor(2) as ex:
         run_batch(q, tmp_path / "r.jsonl", executor=ex, progress=False)
@@ -290,7 +291,7 @@ def test_map_rows_answer_what_resistible_forces_answers(tmp_path: Path) -> None:
     )
     np.testing.assert_array_equal(vals, ref)
     nobase = resistible_forces(g, directions=16, cap=5.0)
-    rows0 = map_rows(g, directions=16, cap=5.0)
+    rows0 = map_rows(g, MapPlane(directions=16), cap=5.0)
     q0 = tmp_path / "q0.jsonl"
     write_rows(q0, rows0)
     with LocalExecutor(1) as ex:

@@ -513,14 +513,21 @@ def test_solve_turns_a_solved_answer_without_its_value_into_an_error():
     """The one gate every method passes (``stability.solve``): a stable answer of an
     optimisation query without a finite value, or "solved" without stable/unstable, is
     status "error" with a message, never an answer."""
+    from dataclasses import dataclass
+
     from stability import Solution, api
+    from stability.options import MethodOptions
 
     answers = {"stable": (True, None), "nan": (True, float("nan")), "none": (None, 1.0)}
 
+    @dataclass(frozen=True)
+    class BrokenOptions(MethodOptions):
+        answer: str = "stable"
+
     @api.register("_broken", queries=(Existence, MaxDisturbance, OptimalCommands),
-                  planar=True, spatial=True, hand=True)  # fmt: skip
-    def _broken(grasp, query, answer="stable"):
-        stable, value = answers[answer]
+                  planar=True, spatial=True, options=BrokenOptions, hand=True)  # fmt: skip
+    def _broken(grasp, query, opts, deadline):
+        stable, value = answers[opts.answer]
         return Solution(stable, "_broken", grasp, query, value=value)
 
     try:
