@@ -18,7 +18,15 @@ from .contacts import (
     hand_coordinates,
     transmission,
 )
-from .scenes import SceneError, SettleInfo, available_scenes, load_scene, scene_about, settle
+from .scenes import (
+    SceneError,
+    SettleInfo,
+    SettleOptions,
+    available_scenes,
+    load_scene,
+    scene_about,
+    settle,
+)
 
 __all__ = [
     "HandOptions",
@@ -26,6 +34,7 @@ __all__ = [
     "SceneError",
     "SceneGrasp",
     "SettleInfo",
+    "SettleOptions",
     "available_scenes",
     "grasp_from_mujoco",
     "hand_coordinates",

@@ -28,6 +28,7 @@ import math  # noqa: E402
 import sys  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -43,17 +44,31 @@ OUT_DIR = Path("runs") / "ihm"  # where show and map write by default (git ignor
 
 
 def _parser() -> argparse.ArgumentParser:
+    """The CLI's parser: one subcommand each for list, show, map and batch."""
     parser = ArgumentParser(
         prog=PROG,
         description="Grasp scenes of the thesis on MuJoCo: list them, or settle one and "
         "show its contacts and forces (table, PNG, rerun recording).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_list(sub)
+    _add_show(sub)
+    _add_map(sub)
+    _add_batch(sub)
+    return parser
+
+
+def _add_list(sub: Any) -> None:
+    """The ``list`` subcommand (no arguments)."""
     sub.add_parser(
         "list",
         help="list the scenes in assets/scenes with their descriptions",
         description="List the scenes in assets/scenes, one per line: name and ihm_about.",
     )
+
+
+def _add_show(sub: Any) -> None:
+    """The ``show`` subcommand: a scene, the commands it settles with, the PNG and .rrd."""
     show = sub.add_parser(
         "show",
         help="settle a scene's grasp; print its contacts; write a PNG (and .rrd)",
@@ -90,6 +105,16 @@ def _parser() -> argparse.ArgumentParser:
         metavar="M_PER_N",
         help="arrow length per newton [m/N] (default: largest force 0.8 object radii long)",
     )
+    show.add_argument(
+        "--no-contacts",
+        action="store_true",
+        help="draw the scene without contact points and force arrows (same view)",
+    )
+
+
+def _add_map(sub: Any) -> None:
+    """The ``map`` subcommand: the :class:`ihm.sim_maps.MapSpec` fields, the methods and
+    their options, the workers and where the CSV and PNG go."""
     mp_ = sub.add_parser(
         "map",
         help="resistible force per direction in a plane: MuJoCo and/or a stability method "
@@ -157,6 +182,10 @@ def _parser() -> argparse.ArgumentParser:
                      "(needs pip install -e '.[ray]')")  # fmt: skip
     mp_.add_argument("--out", type=Path, default=OUT_DIR, help=f"output folder (default {OUT_DIR})")
     mp_.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_batch(sub: Any) -> None:
+    """The ``batch`` subcommand: a map's queries as a file for ``python -m stability.batch``."""
     bt = sub.add_parser(
         "batch",
         help="write a map's queries as a batch file for python -m stability.batch",
@@ -175,12 +204,6 @@ def _parser() -> argparse.ArgumentParser:
                     help="commanded actuator forces (default: the scene's preload)")  # fmt: skip
     bt.add_argument("--nonbackdrivable", action="store_true", help="ratchet the motor joints")
     bt.add_argument("--cap", type=float, default=10.0, help="largest force asked [N] (10)")
-    show.add_argument(
-        "--no-contacts",
-        action="store_true",
-        help="draw the scene without contact points and force arrows (same view)",
-    )
-    return parser
 
 
 def _cmd_list() -> int:
@@ -261,7 +284,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 def _cmd_map(args: argparse.Namespace) -> int:
     from stability.api import RENAMED_METHODS
 
-    from .sim_maps import MapError, check_options, run
+    from .sim_maps import MapError, MapSpec, check_options, run
 
     for i, method in enumerate(args.method):  # old names work, and the user is told once
         if method in RENAMED_METHODS:
@@ -279,10 +302,12 @@ def _cmd_map(args: argparse.Namespace) -> int:
             opts["normal_uncertainty"] = float(np.radians(args.normal_uncertainty))
         if args.seat is not None and not args.nonbackdrivable:
             raise MapError("--seat needs --nonbackdrivable (it ratchets the seated grasp)")
+        spec = MapSpec(args.scene, args.plane, args.directions, seat=args.seat,
+                       nonbackdrivable=args.nonbackdrivable, frame=args.frame,
+                       cap=args.cap)  # fmt: skip
         csv_path, png, walls, agree = run(
-            args.scene, args.plane, args.directions, preloads, args.nonbackdrivable,
-            args.cap, args.workers, args.out, progress=not args.no_progress,
-            methods=args.method, seat=args.seat, frame=args.frame, ray=args.ray, **opts,
+            spec, preloads, args.out, methods=args.method, workers=args.workers,
+            progress=not args.no_progress, ray=args.ray, **opts,
         )  # fmt: skip
     except (MapError, GraspError, OSError) as exc:  # SceneError is a GraspError
         print(f"{PROG} map: error: {exc}", file=sys.stderr)
@@ -318,12 +343,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "batch":
         from stability.batch import write_rows
 
-        from .sim_maps import MapError, scene_map_rows
+        from .sim_maps import MapError, MapSpec, scene_map_rows
 
         try:
-            rows = scene_map_rows(args.scene, args.plane, args.directions, method=args.method,
-                                  preload=args.preload, nonbackdrivable=args.nonbackdrivable,
-                                  frame=args.frame, cap=args.cap)  # fmt: skip
+            spec = MapSpec(args.scene, args.plane, args.directions, preload=args.preload,
+                           nonbackdrivable=args.nonbackdrivable, frame=args.frame,
+                           cap=args.cap)  # fmt: skip
+            rows = scene_map_rows(spec, method=args.method)
             n = write_rows(args.out, rows)
         except (MapError, GraspError, OSError) as exc:
             print(f"{PROG} batch: error: {exc}", file=sys.stderr)

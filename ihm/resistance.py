@@ -59,7 +59,7 @@ from __future__ import annotations
 import copy
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import mujoco
@@ -74,6 +74,7 @@ __all__ = [
     "RATE_CHECK_FACTOR",
     "RateDependenceWarning",
     "Resistance",
+    "ResistanceOptions",
     "simulated_resistance",
     "solver_conditions",
     "touching_bodies",
@@ -137,23 +138,133 @@ def solver_conditions(model: mujoco.MjModel) -> dict[str, Any]:
     }
 
 
+@dataclass(frozen=True)
+class ResistanceOptions:
+    """How :func:`simulated_resistance` ramps the load and when a run ends (module doc).
+
+    rate : load growth [units of s per second]; None: 1 for a direction with a force
+        part, 0.05 for a pure torque.
+    cap : largest load tried (the solvers' cap, 100 by default) [N or N m per unit
+        direction].
+    max_shift, max_turn : the hard end of the run [m], [rad]; also the units of the slip
+        rule's speeds.
+    settle_s : rest before the ramp [s] (the reference pose is taken after it).
+    stop_on_new_contact : end the run when the body touches a body it did not touch after
+        ``settle_s`` (module doc).
+    slip_factor : a slip starts where the speed exceeds this times the creep reference.
+    stop_rule : ``"slip"`` (default: the slip rule, module doc) or ``"distance"``
+        (``value`` is the largest load held before the object moved ``max_shift`` or
+        turned ``max_turn``, creep included; the thesis experiments in
+        :mod:`ihm.experiments` and the simulated maps of :mod:`ihm.sim_maps` use it, so
+        that their documented figures stay reproducible).
+    check_rate : repeat the ramp :data:`RATE_CHECK_FACTOR` times slower from a copy of the
+        state and warn (:class:`RateDependenceWarning`) if the answers differ by more than
+        ``rate_tol`` (relative to ``value``). Costs up to 4x the ramp's time again.
+    rate_tol : that relative tolerance.
+
+    Invalid values raise :class:`stability.GraspError` when the options are made.
+    """
+
+    rate: float | None = None
+    cap: float = 100.0
+    max_shift: float = 0.002
+    max_turn: float = 0.05
+    settle_s: float = 0.1
+    stop_on_new_contact: bool = True
+    slip_factor: float = 30.0
+    stop_rule: str = "slip"
+    check_rate: bool = True
+    rate_tol: float = 0.2
+
+    def __post_init__(self) -> None:
+        nums = {"rate": self.rate, "cap": self.cap, "max_shift": self.max_shift,
+                "max_turn": self.max_turn, "settle_s": self.settle_s,
+                "slip_factor": self.slip_factor, "rate_tol": self.rate_tol}  # fmt: skip
+        for key, v in nums.items():
+            if key == "rate" and v is None:
+                continue  # the default rate, chosen by the direction
+            if (
+                not isinstance(v, (int, float, np.number))
+                or isinstance(v, bool)
+                or not np.isfinite(v)
+            ):
+                raise GraspError(f"{key} must be a finite number, got {v!r}")
+        rate, cap, max_shift, max_turn = self.rate, self.cap, self.max_shift, self.max_turn
+        if not ((rate is None or rate > 0) and cap > 0 and max_shift > 0 and max_turn > 0
+                and self.settle_s >= 0):  # fmt: skip
+            raise GraspError("rate, cap, max_shift and max_turn must be > 0, settle_s >= 0, got "
+                             f"rate={rate!r}, cap={cap!r}, max_shift={max_shift!r}, "
+                             f"max_turn={max_turn!r}, settle_s={self.settle_s!r}")  # fmt: skip
+        if not self.slip_factor > 1:
+            raise GraspError(f"slip_factor must be > 1, got {self.slip_factor!r}")
+        if self.stop_rule not in ("slip", "distance"):
+            raise GraspError(f"stop_rule must be 'slip' or 'distance', got {self.stop_rule!r}")
+        if not self.rate_tol > 0:
+            raise GraspError(f"rate_tol must be > 0, got {self.rate_tol!r}")
+        if not isinstance(self.check_rate, (bool, np.bool_)):
+            raise GraspError(f"check_rate must be True or False, got {self.check_rate!r}")
+
+
+def _unit_direction(direction: ArrayLike) -> NDArray[np.float64]:
+    """``direction`` as 6 floats scaled so that its largest block (force or torque) has
+    unit norm; :class:`stability.GraspError` if it is not 6 finite numbers or is zero."""
+    w = np.asarray(direction, dtype=float).reshape(-1)
+    if w.shape != (6,) or not np.isfinite(w).all():
+        raise GraspError(f"direction must be 6 finite numbers (force, torque), got {direction!r}")
+    scale = max(np.linalg.norm(w[:3]), np.linalg.norm(w[3:]))
+    if scale == 0:
+        raise GraspError("direction must not be zero")
+    return w / scale
+
+
+def _check_ratchet(
+    model: mujoco.MjModel, data: mujoco.MjData, ratchet: Ratchet | None, check_rate: bool
+) -> None:
+    """A :class:`Ratchet` must be on ``model`` and ``data``; the rate check needs a
+    :class:`Ratchet` (it copies it), not another stepper."""
+    if isinstance(ratchet, Ratchet) and (ratchet.model is not model or ratchet.data is not data):
+        raise GraspError("ratchet was built on another model or data than the ones passed")
+    if check_rate and ratchet is not None and not isinstance(ratchet, Ratchet):
+        raise GraspError(
+            "check_rate=True repeats the ramp on a copy of the state and needs an "
+            f"ihm.ratchet.Ratchet to copy, got {type(ratchet).__name__}; pass check_rate=False"
+        )
+
+
+def _conditions(
+    model: mujoco.MjModel, rate: float, opts: ResistanceOptions, ratchet: Ratchet | None
+) -> dict[str, Any]:
+    """:attr:`Resistance.conditions`: the model's solver settings and the run's options."""
+    return {
+        **solver_conditions(model),
+        "rate": float(rate),
+        "cap": float(opts.cap),
+        "max_shift": float(opts.max_shift),
+        "max_turn": float(opts.max_turn),
+        "settle_s": float(opts.settle_s),
+        "ratchet": ratchet is not None,
+        "stop_on_new_contact": bool(opts.stop_on_new_contact),
+        "stop_rule": "distance: the largest load held before max_shift or max_turn"
+        if opts.stop_rule == "distance"
+        else (
+            f"slip: {SLIP_WINDOW_S * 1e3:g} ms speed > {opts.slip_factor:g} x the mean speed "
+            f"over [t/4, t/2] (floor {SLIP_FLOOR:g}), in max_shift/s or max_turn/s, until it "
+            f"falls below 1/{SLIP_DROP:g} of its peak; a slip reaching max_shift or max_turn "
+            "is the breakaway; else the run ends at max_shift, max_turn, a new contact or "
+            "the cap"
+        ),
+        "slip_factor": float(opts.slip_factor),
+    }
+
+
 def simulated_resistance(
     model: mujoco.MjModel,
     data: mujoco.MjData,
     direction: ArrayLike,
     *,
-    rate: float | None = None,
-    cap: float = 100.0,
-    max_shift: float = 0.002,
-    max_turn: float = 0.05,
-    settle_s: float = 0.1,
     ratchet: Ratchet | None = None,
     body: str = "object",
-    stop_on_new_contact: bool = True,
-    slip_factor: float = 30.0,
-    check_rate: bool = True,
-    rate_tol: float = 0.2,
-    stop_rule: str = "slip",
+    options: ResistanceOptions | None = None,
 ) -> Resistance:
     """Ramp a load along ``direction`` on ``body`` until it slips (module doc).
 
@@ -163,91 +274,45 @@ def simulated_resistance(
         except by ``ratchet``'s stops).
     direction : wrench direction (fx, fy, fz, tx, ty, tz), world axes, normalised here so
         that its largest block (force or torque) has unit norm.
-    rate : load growth [units of s per second]; default 1 for a force direction, 0.05 for
-        a pure torque.
-    cap : largest load tried (the solvers' cap, 100 by default).
-    max_shift, max_turn : the hard end of the run [m], [rad]; also the units of the slip
-        rule's speeds.
-    settle_s : rest before the ramp [s] (the reference pose is taken after it).
     ratchet : a :class:`ihm.ratchet.Ratchet` on ``model`` and ``data``, updated every step
         (nonbackdrivable joints).
-    stop_on_new_contact : end the run when ``body`` touches a body it did not touch after
-        ``settle_s`` (module doc).
-    slip_factor : a slip starts where the speed exceeds this times the creep reference.
-    check_rate : repeat the ramp :data:`RATE_CHECK_FACTOR` times slower from a copy of the
-        state and warn (:class:`RateDependenceWarning`) if the answers differ by more than
-        ``rate_tol`` (relative to ``value``). Costs up to 4x the ramp's time again.
-    stop_rule : ``"slip"`` (default: the slip rule, module doc) or ``"distance"``
-        (``value`` is the largest load held before the object moved ``max_shift`` or
-        turned ``max_turn``, creep included; the thesis experiments in
-        :mod:`ihm.experiments` and the simulated maps of :mod:`ihm.sim_maps` use it, so
-        that their documented figures stay reproducible).
+    body : the loaded body (a free body: the object).
+    options : the ramp and its end (:class:`ResistanceOptions`: rate, cap, hard limits,
+        slip rule, rate check); its defaults when None.
     """
-    w = np.asarray(direction, dtype=float).reshape(-1)
-    if w.shape != (6,) or not np.isfinite(w).all():
-        raise GraspError(f"direction must be 6 finite numbers (force, torque), got {direction!r}")
-    scale = max(np.linalg.norm(w[:3]), np.linalg.norm(w[3:]))
-    if scale == 0:
-        raise GraspError("direction must not be zero")
-    w = w / scale
-    if rate is None:
+    opts = ResistanceOptions() if options is None else options
+    w = _unit_direction(direction)
+    if opts.rate is None:
         rate = 1.0 if np.linalg.norm(w[:3]) > 0 else 0.05
-    nums = {"rate": rate, "cap": cap, "max_shift": max_shift, "max_turn": max_turn,
-            "settle_s": settle_s, "slip_factor": slip_factor, "rate_tol": rate_tol}  # fmt: skip
-    for key, v in nums.items():
-        if not isinstance(v, (int, float, np.number)) or isinstance(v, bool) or not np.isfinite(v):
-            raise GraspError(f"{key} must be a finite number, got {v!r}")
-    if not (rate > 0 and cap > 0 and max_shift > 0 and max_turn > 0 and settle_s >= 0):
-        raise GraspError("rate, cap, max_shift and max_turn must be > 0, settle_s >= 0, got "
-                         f"rate={rate!r}, cap={cap!r}, max_shift={max_shift!r}, "
-                         f"max_turn={max_turn!r}, settle_s={settle_s!r}")  # fmt: skip
-    if not slip_factor > 1:
-        raise GraspError(f"slip_factor must be > 1, got {slip_factor!r}")
-    if stop_rule not in ("slip", "distance"):
-        raise GraspError(f"stop_rule must be 'slip' or 'distance', got {stop_rule!r}")
-    if not rate_tol > 0:
-        raise GraspError(f"rate_tol must be > 0, got {rate_tol!r}")
-    if not isinstance(check_rate, (bool, np.bool_)):
-        raise GraspError(f"check_rate must be True or False, got {check_rate!r}")
+    else:
+        rate = float(opts.rate)
     bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
     if bid < 0:
         raise GraspError(f"no body named {body!r}")
-    if isinstance(ratchet, Ratchet) and (ratchet.model is not model or ratchet.data is not data):
-        raise GraspError("ratchet was built on another model or data than the ones passed")
-    if check_rate and ratchet is not None and not isinstance(ratchet, Ratchet):
-        raise GraspError(
-            "check_rate=True repeats the ramp on a copy of the state and needs an "
-            f"ihm.ratchet.Ratchet to copy, got {type(ratchet).__name__}; pass check_rate=False"
-        )
-    conditions = {
-        **solver_conditions(model),
-        "rate": float(rate),
-        "cap": float(cap),
-        "max_shift": float(max_shift),
-        "max_turn": float(max_turn),
-        "settle_s": float(settle_s),
-        "ratchet": ratchet is not None,
-        "stop_on_new_contact": bool(stop_on_new_contact),
-        "stop_rule": "distance: the largest load held before max_shift or max_turn"
-        if stop_rule == "distance"
-        else (
-            f"slip: {SLIP_WINDOW_S * 1e3:g} ms speed > {slip_factor:g} x the mean speed over "
-            f"[t/4, t/2] (floor {SLIP_FLOOR:g}), in max_shift/s or max_turn/s, until it falls "
-            f"below 1/{SLIP_DROP:g} of its peak; a slip reaching max_shift or max_turn is the "
-            "breakaway; else the run ends at max_shift, max_turn, a new contact or the cap"
-        ),
-        "slip_factor": float(slip_factor),
-    }
-    start = copy.copy(data) if check_rate else None
-    stops0 = ratchet.stops.copy() if check_rate and ratchet is not None else None
-    factor = math.inf if stop_rule == "distance" else float(slip_factor)  # inf: never a slip
-    args = (model, w, float(cap), float(max_shift), float(max_turn), float(settle_s), bid,
-            bool(stop_on_new_contact), factor)  # fmt: skip
-    res = _ramp(data, float(rate), ratchet, *args)
-    res.conditions = conditions
-    if not check_rate:
+    _check_ratchet(model, data, ratchet, opts.check_rate)
+    conditions = _conditions(model, rate, opts, ratchet)
+    start = copy.copy(data) if opts.check_rate else None
+    stops0 = ratchet.stops.copy() if opts.check_rate and ratchet is not None else None
+    res = replace(_ramp(model, data, w, bid, rate, ratchet, opts), conditions=conditions)
+    if start is None:
         return res
-    slow_rate = float(rate) / RATE_CHECK_FACTOR
+    slow = _slow_repeat(model, start, w, bid, rate, ratchet, stops0, opts)
+    return replace(res, rate_check=_rate_check(res, slow, rate, opts.rate_tol))
+
+
+def _slow_repeat(
+    model: mujoco.MjModel,
+    start: mujoco.MjData,
+    w: NDArray[np.float64],
+    bid: int,
+    rate: float,
+    ratchet: Ratchet | None,
+    stops0: NDArray[np.float64] | None,
+    opts: ResistanceOptions,
+) -> Resistance:
+    """The ramp again at ``rate / RATE_CHECK_FACTOR`` from ``start`` (the state before the
+    first ramp); a ratchet is copied onto ``start`` with its stops ``stops0`` as they were
+    then, and the caller's ratchet keeps the stops the first ramp left."""
     twin = None
     if ratchet is not None:
         stops_end = ratchet.stops.copy()
@@ -255,13 +320,28 @@ def simulated_resistance(
         twin.data = start
         twin.stops = stops0
     try:
-        slow = _ramp(start, slow_rate, twin, *args)
+        return _ramp(model, start, w, bid, rate / RATE_CHECK_FACTOR, twin, opts)
     finally:
         if ratchet is not None:
             ratchet.stops = stops_end
+
+
+def _rate_check(res: Resistance, slow: Resistance, rate: float, rate_tol: float) -> dict[str, Any]:
+    """:attr:`Resistance.rate_check` of the ramp ``res`` at ``rate`` and its slow repeat;
+    warns (:class:`RateDependenceWarning`) when they differ by more than ``rate_tol`` of
+    ``res.value`` (relative)."""
+    slow_rate = float(rate) / RATE_CHECK_FACTOR
     diff = abs(slow.value - res.value)
     rel = diff / abs(res.value) if res.value != 0 else (0.0 if diff == 0 else float("inf"))
-    res.rate_check = {
+    if rel > rate_tol:
+        warnings.warn(
+            f"simulated resistance depends on the ramp rate: {res.value:.4g} at {rate:g}/s "
+            f"({res.reason}), {slow.value:.4g} at {slow_rate:g}/s ({slow.reason}): "
+            f"{rel:.0%} apart, more than rate_tol {rate_tol:.0%}",
+            RateDependenceWarning,
+            stacklevel=3,
+        )
+    return {
         "rate": float(rate),
         "value": res.value,
         "reason": res.reason,
@@ -272,115 +352,193 @@ def simulated_resistance(
         "rate_tol": float(rate_tol),
         "warned": bool(rel > rate_tol),
     }
-    if rel > rate_tol:
-        warnings.warn(
-            f"simulated resistance depends on the ramp rate: {res.value:.4g} at {rate:g}/s "
-            f"({res.reason}), {slow.value:.4g} at {slow_rate:g}/s ({slow.reason}): "
-            f"{rel:.0%} apart, more than rate_tol {rate_tol:.0%}",
-            RateDependenceWarning,
-            stacklevel=2,
-        )
-    return res
+
+
+def _advance(model: mujoco.MjModel, data: mujoco.MjData, ratchet: Ratchet | None, n: int) -> None:
+    """``n`` physics steps, through the ratchet when there is one."""
+    if ratchet is None:
+        mujoco.mj_step(model, data, nstep=n)
+    else:
+        ratchet.step(n)
+
+
+class _Motion:
+    """The object's motion during a ramp, from its rest pose ``p0``, ``q0``: its
+    displacement [m], rotation [rad], and speeds over windows of ``win`` steps in units of
+    the hard limits per second (``max(|dp| / max_shift, |dtheta| / max_turn) / seconds``).
+    Keeps the poses of the last ``win + 1`` steps (a ring) and one every ``win`` steps
+    (the grid the creep reference is read on)."""
+
+    def __init__(
+        self, p0: NDArray, q0: NDArray, dt: float, max_shift: float, max_turn: float
+    ) -> None:
+        self.p0, self.q0 = p0, q0
+        self.max_shift, self.max_turn = max_shift, max_turn
+        self.win = max(1, int(round(SLIP_WINDOW_S / dt)))  # steps per speed window, trace row
+        self.span = self.win * dt  # [s]
+        self.ring_p = np.tile(p0, (self.win + 1, 1))  # poses of the last win + 1 steps
+        self.ring_q = np.tile(q0, (self.win + 1, 1))
+        self.grid_p, self.grid_q = [p0], [q0]  # poses every win steps from the ramp's start
+        self._rot = np.zeros(3)
+
+    def speed(self, pa: NDArray, qa: NDArray, pb: NDArray, qb: NDArray, seconds: float) -> float:
+        """Mean speed from pose a to pose b over ``seconds`` [1/s]."""
+        mujoco.mju_subQuat(self._rot, qb, qa)
+        return (max(math.hypot(*(pb - pa)) / self.max_shift,
+                    math.hypot(*self._rot) / self.max_turn) / seconds)  # fmt: skip
+
+    def moved(self, p: NDArray, q: NDArray) -> tuple[float, float]:
+        """Displacement [m] and rotation angle [rad] of pose ``p``, ``q`` from rest."""
+        mujoco.mju_subQuat(self._rot, q, self.q0)
+        return math.hypot(*(p - self.p0)), math.hypot(*self._rot)
+
+    def window_start(self, k: int) -> tuple[NDArray, NDArray]:
+        """The pose ``win`` steps before step ``k`` (the rest pose before the ramp)."""
+        old = (k - self.win) % (self.win + 1)
+        return self.ring_p[old], self.ring_q[old]
+
+    def push(self, k: int, p: NDArray, q: NDArray) -> None:
+        """Keep the pose of step ``k`` in the ring."""
+        self.ring_p[k % (self.win + 1)] = p
+        self.ring_q[k % (self.win + 1)] = q
+
+    def creep_reference(self, p: NDArray, q: NDArray) -> float | None:
+        """Add a grid pose; the creep reference speed, the mean over grid points
+        ``[g/4, g/2]`` (at least :data:`SLIP_FLOOR`), once that spans
+        :data:`SLIP_MIN_SPAN` windows (else None)."""
+        self.grid_p.append(p.copy())
+        self.grid_q.append(q.copy())
+        g = len(self.grid_p) - 1
+        a, b = g // 4, g // 2
+        if b - a < SLIP_MIN_SPAN:
+            return None
+        gp, gq = self.grid_p, self.grid_q
+        return max(self.speed(gp[a], gq[a], gp[b], gq[b], (b - a) * self.span), SLIP_FLOOR)
+
+
+@dataclass
+class _SlipRule:
+    """The slip rule's state (module doc): a slip starts at a speed above ``factor`` times
+    the creep reference ``ref`` and ends below its peak over :data:`SLIP_DROP`. ``start``:
+    the step before the slip's first window (-1: not slipping); ``shift``, ``turn``: the
+    displacement [m], [rad] there; ``slips``: slips that ended."""
+
+    factor: float
+    ref: float = math.inf
+    start: int = -1
+    peak: float = 0.0
+    shift: float = 0.0
+    turn: float = 0.0
+    slips: int = 0
+
+    def starts(self, u: float) -> bool:
+        """No slip yet, and speed ``u`` [1/s] starts one."""
+        return self.start < 0 and u > self.factor * self.ref
+
+    def begin(self, start: int, u: float, shift: float, turn: float) -> None:
+        self.start, self.peak = start, u
+        self.shift, self.turn = shift, turn
+
+    def follow(self, u: float) -> None:
+        """A slip under way ends when ``u`` falls below its peak over :data:`SLIP_DROP`."""
+        if self.start >= 0:
+            self.peak = max(self.peak, u)
+            if u < self.peak / SLIP_DROP:
+                self.start, self.slips = -1, self.slips + 1
+
+
+def _stop_reason(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    bid: int,
+    moved: tuple[float, float],
+    opts: ResistanceOptions,
+    touching: set[int],
+) -> str:
+    """Why the run ends at this step ("" if it goes on): the hard limits on the
+    displacement ``moved`` ([m], [rad]) or a body touched that was not at rest."""
+    shift, turn = moved
+    if shift > opts.max_shift or not np.isfinite(shift):
+        return "shift"
+    if turn > opts.max_turn:
+        return "turn"
+    if opts.stop_on_new_contact:
+        new = touching_bodies(model, data, bid) - touching
+        if new:
+            return "new contact: " + ", ".join(sorted(model.body(b).name for b in new))
+    return ""
 
 
 def _ramp(
+    model: mujoco.MjModel,
     data: mujoco.MjData,
+    w: NDArray[np.float64],
+    bid: int,
     rate: float,
     ratchet: Ratchet | None,
-    model: mujoco.MjModel,
-    w: NDArray[np.float64],
-    cap: float,
-    max_shift: float,
-    max_turn: float,
-    settle_s: float,
-    bid: int,
-    stop_on_new_contact: bool,
-    slip_factor: float,
+    opts: ResistanceOptions,
 ) -> Resistance:
-    """One ramp at ``rate`` with the slip rule (module doc)."""
+    """One ramp at ``rate`` with the slip rule (module doc): ``settle_s`` of rest, then the
+    load ``s w`` on body ``bid`` grows until a stop reason or the cap. The distance rule is
+    the slip rule that never calls a slip."""
     dt = model.opt.timestep
-
-    def advance(n: int) -> None:
-        if ratchet is None:
-            mujoco.mj_step(model, data, nstep=n)
-        else:
-            ratchet.step(n)
-
+    cap = float(opts.cap)
     data.xfrc_applied[bid] = 0.0
-    advance(int(round(settle_s / dt)))
-    p0 = data.xipos[bid].copy()
-    q0 = data.xquat[bid].copy()
+    _advance(model, data, ratchet, int(round(float(opts.settle_s) / dt)))
     touching = touching_bodies(model, data, bid)
-    win = max(1, int(round(SLIP_WINDOW_S / dt)))  # steps per speed window and trace row
-    span = win * dt
-    ring_p = np.tile(p0, (win + 1, 1))  # poses of the last win + 1 steps
-    ring_q = np.tile(q0, (win + 1, 1))
-    grid_p, grid_q = [p0], [q0]  # poses every win steps from the ramp's start
-    rot = np.zeros(3)
-
-    def speed(pa: NDArray, qa: NDArray, pb: NDArray, qb: NDArray, seconds: float) -> float:
-        mujoco.mju_subQuat(rot, qb, qa)
-        return max(math.hypot(*(pb - pa)) / max_shift, math.hypot(*rot) / max_turn) / seconds
-
-    def moved(p: NDArray, q: NDArray) -> tuple[float, float]:
-        mujoco.mju_subQuat(rot, q, q0)
-        return math.hypot(*(p - p0)), math.hypot(*rot)
-
-    steps = int(np.ceil(cap / rate / dt))
+    motion = _Motion(data.xipos[bid].copy(), data.xquat[bid].copy(), dt,
+                     float(opts.max_shift), float(opts.max_turn))  # fmt: skip
+    slip = _SlipRule(math.inf if opts.stop_rule == "distance" else float(opts.slip_factor))
     trace = []
     held = 0.0
     shift = turn = 0.0
-    ref = np.inf  # creep reference speed [1/s]
-    slip_start = -1  # step before the slip's first window; -1: not slipping
-    slip_peak = slip_shift = slip_turn = 0.0
-    slips = 0
     k = 0
     reason = ""
-    for k in range(1, steps + 1):
+    for k in range(1, int(np.ceil(cap / rate / dt)) + 1):
         s = min(cap, rate * k * dt)
         data.xfrc_applied[bid] = s * w
-        advance(1)
+        _advance(model, data, ratchet, 1)
         pos, quat = data.xipos[bid], data.xquat[bid]
-        shift, turn = moved(pos, quat)
-        old = (k - win) % (win + 1)  # the pose win steps ago (the rest pose before that)
-        u = speed(ring_p[old], ring_q[old], pos, quat, span)
-        if slip_start < 0 and u > slip_factor * ref:
-            slip_start, slip_peak = max(0, k - win), u
-            slip_shift, slip_turn = moved(ring_p[old], ring_q[old])
-        elif slip_start >= 0:
-            slip_peak = max(slip_peak, u)
-            if u < slip_peak / SLIP_DROP:
-                slip_start, slips = -1, slips + 1
-        ring_p[k % (win + 1)] = pos
-        ring_q[k % (win + 1)] = quat
-        if k % win == 0:
-            grid_p.append(pos.copy())
-            grid_q.append(quat.copy())
+        shift, turn = motion.moved(pos, quat)
+        pa, qa = motion.window_start(k)
+        u = motion.speed(pa, qa, pos, quat, motion.span)
+        if slip.starts(u):
+            slip.begin(max(0, k - motion.win), u, *motion.moved(pa, qa))
+        else:
+            slip.follow(u)
+        motion.push(k, pos, quat)
+        if k % motion.win == 0:
             trace.append((s, shift, turn, u))
-            g = k // win
-            a, b = g // 4, g // 2
-            if b - a >= SLIP_MIN_SPAN:
-                mean = speed(grid_p[a], grid_q[a], grid_p[b], grid_q[b], (b - a) * span)
-                ref = max(mean, SLIP_FLOOR)
-        if shift > max_shift or not np.isfinite(shift):
-            reason = "shift"
-        elif turn > max_turn:
-            reason = "turn"
-        elif stop_on_new_contact:
-            new = touching_bodies(model, data, bid) - touching
-            if new:
-                reason = "new contact: " + ", ".join(sorted(model.body(b).name for b in new))
+            ref = motion.creep_reference(pos, quat)
+            slip.ref = slip.ref if ref is None else ref
+        reason = _stop_reason(model, data, bid, (shift, turn), opts, touching)
         if reason:
             break
         held = s
     data.xfrc_applied[bid] = 0.0
-    tr = np.array(trace, dtype=float).reshape(-1, 4)
-    if not reason:
-        reason = "cap"
-    slipping = slip_start >= 0 and reason != "cap"
+    return _resistance(np.array(trace, dtype=float).reshape(-1, 4), held, (shift, turn),
+                       reason or "cap", slip, rate, dt, k)  # fmt: skip
+
+
+def _resistance(
+    trace: NDArray[np.float64],
+    held: float,
+    moved: tuple[float, float],
+    reason: str,
+    slip: _SlipRule,
+    rate: float,
+    dt: float,
+    k: int,
+) -> Resistance:
+    """The :class:`Resistance` of a ramp at ``rate`` [per second] in steps of ``dt`` [s]
+    that ended for ``reason`` at step ``k`` with the displacement ``moved`` ([m], [rad]):
+    the load at the slip's start where a slip was under way (breakaway), else the last
+    load ``held``."""
+    shift, turn = moved
+    slipping = slip.start >= 0 and reason != "cap"
     if slipping:
-        value = rate * slip_start * dt
-        creep_shift, creep_turn = slip_shift, slip_turn
+        value = rate * slip.start * dt
+        creep_shift, creep_turn = slip.shift, slip.turn
         if not reason.startswith("new contact"):
             reason = "slip"
     else:
@@ -393,13 +551,13 @@ def _ramp(
         shift=shift,
         turn=turn,
         seconds=k * dt,
-        trace=tr,
+        trace=trace,
         reason=reason,
         breakaway=bool(slipping),
         creep_shift=float(creep_shift),
         creep_turn=float(creep_turn),
         creep_rate=float(creep_rate),
-        slips=slips,
+        slips=slip.slips,
     )
 
 

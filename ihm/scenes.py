@@ -14,14 +14,16 @@ file, so that adding a scene is adding a file:
   line saying which grasp of the thesis the scene is.
 
 Settling (:func:`settle`) is documented there; it ends when every velocity of
-the model is below ``vtol`` for ``hold_s`` seconds of simulated time.
+the model is below ``vtol`` for ``hold_s`` seconds of simulated time (both fields of
+:class:`SettleOptions`).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -38,6 +40,7 @@ __all__ = [
     "LoadedScene",
     "SceneError",
     "SettleInfo",
+    "SettleOptions",
     "available_scenes",
     "load_scene",
     "scene_about",
@@ -255,26 +258,194 @@ def _run_until_rest(
     return max_steps, vmax
 
 
+@dataclass(frozen=True)
+class SettleOptions:
+    """Tolerances and time limits of :func:`settle` (its steps 1-4), in simulated time.
+
+    vtol : rest is every generalized velocity below this [m/s, rad/s] (> 0)
+    hold_s : ... for this many consecutive seconds [s] (>= 0)
+    grip_s : the grip with gravity off before rest is sought [s] (>= 0)
+    max_s : the longest wait for rest, per force round [s] (> 0)
+    rounds : force rounds at most (an integer >= 1)
+    ftol : a round ends the rounds when every ``|actuator_force - f_c| <= ftol (1 + |f_c|)``
+        [actuator units per unit of ``1 + |f_c|``]
+    force_tol : an actuator whose ``ctrl`` is at the end of ``ctrlrange`` and that misses
+        its command by more than ``force_tol (1 + |f_c|)`` raises (> 0, same units)
+
+    Invalid values raise :class:`SceneError` when the options are made.
+    """
+
+    vtol: float = 1e-4
+    hold_s: float = 0.05
+    grip_s: float = 0.3
+    max_s: float = 10.0
+    rounds: int = 6
+    ftol: float = 1e-3
+    force_tol: float = 0.05
+
+    def __post_init__(self) -> None:
+        times = (("vtol", self.vtol), ("hold_s", self.hold_s), ("grip_s", self.grip_s),
+                 ("max_s", self.max_s))  # fmt: skip
+        for key, value in times:
+            if not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+                raise SceneError(f"{key} must be a finite number >= 0, got {value!r}")
+        if self.vtol <= 0 or self.max_s <= 0:
+            raise SceneError(
+                f"vtol and max_s must be > 0, got vtol={self.vtol!r}, max_s={self.max_s!r}"
+            )
+        if not isinstance(self.rounds, (int, np.integer)) or self.rounds < 1:
+            raise SceneError(f"rounds must be an integer >= 1, got {self.rounds!r}")
+        if not (np.isfinite(self.force_tol) and self.force_tol > 0):
+            raise SceneError(f"force_tol must be a finite number > 0, got {self.force_tol!r}")
+
+
+@dataclass(frozen=True)
+class _Drive:
+    """How :func:`settle` sets ``data.ctrl``: the commands ``f_c`` taken as controls
+    (``by_ctrl``) or as actuator forces through the rest-state gain and bias coefficients
+    ``G``, ``B`` (:func:`_affine`). ``feedback``: (nu,) actuators whose force depends on
+    their length (force rounds needed)."""
+
+    f_c: NDArray[np.float64]
+    G: NDArray[np.float64]
+    B: NDArray[np.float64]
+    by_ctrl: bool
+    feedback: NDArray[np.bool_]
+
+    def apply(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Set ``data.ctrl`` for the commands at the present actuator lengths."""
+        data.ctrl[:] = self.f_c if self.by_ctrl else _commanded_ctrl(model, data, self.f_c,
+                                                                      self.G, self.B)  # fmt: skip
+
+
+def _settle_commands(
+    model: mujoco.MjModel, commands: ArrayLike, command: str
+) -> NDArray[np.float64]:
+    """``commands`` as (nu,) floats, checked: finite, ``command`` "force" or "ctrl", within
+    ``ctrlrange`` (controls) or ``forcerange`` (forces); :class:`SceneError` otherwise."""
+    f_c = _as_forces(commands, model.nu).reshape(-1)
+    if f_c.shape != (model.nu,):
+        raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
+    if not np.all(np.isfinite(f_c)):
+        raise SceneError("commands contain NaN or inf")
+    if command not in ("force", "ctrl"):
+        raise SceneError(f"command must be 'force' or 'ctrl', got {command!r}")
+    by_ctrl = command == "ctrl"
+    if by_ctrl:
+        lo_c, hi_c = model.actuator_ctrlrange.T
+        out = model.actuator_ctrllimited.astype(bool) & ((f_c < lo_c) | (f_c > hi_c))
+        if out.any():
+            a = int(np.flatnonzero(out)[0])
+            raise SceneError(f"actuator {model.actuator(a).name or a}: ctrl {f_c[a]:g} is "
+                             f"outside its ctrlrange [{lo_c[a]:g}, {hi_c[a]:g}]")  # fmt: skip
+    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool) & (not by_ctrl)):
+        flo, fhi = model.actuator_forcerange[a]
+        if fhi > flo and not (flo - 1e-9 <= f_c[a] <= fhi + 1e-9):
+            raise SceneError(
+                f"actuator {model.actuator(a).name or a}: command {f_c[a]:g} is outside its "
+                f"forcerange [{flo:g}, {fhi:g}]"
+            )
+    return f_c
+
+
+def _drive(model: mujoco.MjModel, f_c: NDArray[np.float64], by_ctrl: bool) -> _Drive:
+    """The :class:`_Drive` of the commands; an actuator with zero gain raises
+    :class:`SceneError` (its force cannot be commanded)."""
+    G, B = _affine(model)
+    if np.any(np.abs(G[:, 0]) + np.abs(G[:, 1]) < 1e-12):
+        bad = [model.actuator(a).name for a in np.flatnonzero(np.abs(G).sum(axis=1) < 1e-12)]
+        raise SceneError(f"actuator(s) {bad} have zero gain; cannot command their force")
+    feedback = np.abs(B[:, 1]) + np.abs(G[:, 1]) > 0  # force depends on length: rounds
+    if by_ctrl:
+        feedback[:] = False  # controls are set once: no force rounds
+    return _Drive(f_c, G, B, by_ctrl, feedback)
+
+
+def _grip(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    drive: _Drive,
+    grip_s: float,
+    ratchet: Ratchet | None,
+) -> int:
+    """Step 1: ``grip_s`` [s] of steps with gravity off, the controls reset every step;
+    returns the steps taken."""
+    with _gravity_off(model):
+        n_grip = int(round(grip_s / model.opt.timestep))
+        for _ in range(n_grip):
+            drive.apply(model, data)  # servos act as pure force sources while the fingers close
+            _step(model, data, ratchet)
+    return n_grip
+
+
+def _force_rounds(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    drive: _Drive,
+    opts: SettleOptions,
+    ratchet: Ratchet | None,
+) -> tuple[int, int, float]:
+    """Steps 2 and 3: rest, then (where a force depends on its actuator's length) reset
+    the controls and rest again until the forces match or the rounds run out. Returns
+    (steps, rounds, max ``|qvel|`` at the end); :class:`SceneError` if a round does not
+    come to rest within ``opts.max_s``."""
+    steps = 0
+    done_rounds = 0
+    vmax = np.inf
+    for done_rounds in range(1, opts.rounds + 1):  # noqa: B007
+        k, vmax = _run_until_rest(model, data, opts.vtol, opts.hold_s, 0.0, opts.max_s, ratchet)
+        steps += k
+        if vmax >= opts.vtol:
+            raise SceneError(
+                f"grasp not at rest after {opts.max_s:.1f} s simulated (max |qvel| = {vmax:.3g} "
+                f"> {opts.vtol:g}); the object may have slipped out"
+            )
+        if not drive.feedback.any():
+            break
+        err = np.abs(data.actuator_force - drive.f_c)
+        if np.all(err <= opts.ftol * (1 + np.abs(drive.f_c))) or done_rounds == opts.rounds:
+            break  # converged, or out of rounds: keep the state at rest
+        drive.apply(model, data)
+    return steps, done_rounds, vmax
+
+
+def _check_reached(
+    model: mujoco.MjModel, data: mujoco.MjData, drive: _Drive, force_tol: float
+) -> None:
+    """Step 4's force check: an actuator whose ``ctrl`` sits at the end of ``ctrlrange``
+    and misses its commanded force by more than ``force_tol (1 + |f_c|)`` raises
+    :class:`SceneError` (the command needs a ``ctrl`` beyond the range)."""
+    f_c = drive.f_c
+    err = np.abs(data.actuator_force - f_c) if model.nu else np.zeros(0)
+    lo, hi = model.actuator_ctrlrange.T
+    pinned = model.actuator_ctrllimited.astype(bool) & (
+        np.isclose(data.ctrl, lo) | np.isclose(data.ctrl, hi)
+    )
+    bad = np.flatnonzero(pinned & (err > force_tol * (1 + np.abs(f_c))) & (not drive.by_ctrl))
+    if bad.size:
+        a = int(bad[0])
+        raise SceneError(
+            f"actuator {model.actuator(a).name or a} gives {data.actuator_force[a]:.4g} at "
+            f"rest, not the commanded {f_c[a]:.4g}: its ctrl {data.ctrl[a]:.4g} is at the end "
+            f"of ctrlrange [{lo[a]:g}, {hi[a]:g}] (force_tol {force_tol:g})"
+        )
+
+
 def settle(
     model: mujoco.MjModel,
     data: mujoco.MjData,
     commands: ArrayLike,
     *,
-    vtol: float = 1e-4,
-    hold_s: float = 0.05,
-    grip_s: float = 0.3,
-    max_s: float = 10.0,
-    rounds: int = 6,
-    ftol: float = 1e-3,
+    options: SettleOptions | None = None,
     ratchet: Ratchet | None = None,
-    force_tol: float = 0.05,
     object_body: str | None = "object",
     command: str = "force",
 ) -> SettleInfo:
     """Close the hand with actuator forces ``commands`` until the grasp is at rest.
 
-    ``command="ctrl"`` takes ``commands`` as MuJoCo controls instead (``data.ctrl``: a
-    position servo's target position, a gripper's 0-255 closing command), set once;
+    ``options``: the tolerances and time limits (:class:`SettleOptions`; its defaults when
+    None). ``command="ctrl"`` takes ``commands`` as MuJoCo controls instead (``data.ctrl``:
+    a position servo's target position, a gripper's 0-255 closing command), set once;
     steps 3 and 4's force rounds and force checks are skipped, the others are the same.
 
     Procedure (simulated time, ``model.opt.timestep`` per step):
@@ -309,90 +480,17 @@ def settle(
     be set by ``ctrl`` (muscle, integrator dynamics) or misses its command, or the
     object is not held (step 4).
     """
-    import time
-
-    for key, value in (("vtol", vtol), ("hold_s", hold_s), ("grip_s", grip_s), ("max_s", max_s)):
-        if not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
-            raise SceneError(f"{key} must be a finite number >= 0, got {value!r}")
-    if vtol <= 0 or max_s <= 0:
-        raise SceneError(f"vtol and max_s must be > 0, got vtol={vtol!r}, max_s={max_s!r}")
-    if not isinstance(rounds, (int, np.integer)) or rounds < 1:
-        raise SceneError(f"rounds must be an integer >= 1, got {rounds!r}")
-    f_c = _as_forces(commands, model.nu).reshape(-1)
-    if f_c.shape != (model.nu,):
-        raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
-    if not np.all(np.isfinite(f_c)):
-        raise SceneError("commands contain NaN or inf")
-    if not (np.isfinite(force_tol) and force_tol > 0):
-        raise SceneError(f"force_tol must be a finite number > 0, got {force_tol!r}")
-    if command not in ("force", "ctrl"):
-        raise SceneError(f"command must be 'force' or 'ctrl', got {command!r}")
-    by_ctrl = command == "ctrl"
-    if by_ctrl:
-        lo_c, hi_c = model.actuator_ctrlrange.T
-        out = model.actuator_ctrllimited.astype(bool) & ((f_c < lo_c) | (f_c > hi_c))
-        if out.any():
-            a = int(np.flatnonzero(out)[0])
-            raise SceneError(f"actuator {model.actuator(a).name or a}: ctrl {f_c[a]:g} is "
-                             f"outside its ctrlrange [{lo_c[a]:g}, {hi_c[a]:g}]")  # fmt: skip
-    for a in np.flatnonzero(model.actuator_forcelimited.astype(bool) & (not by_ctrl)):
-        flo, fhi = model.actuator_forcerange[a]
-        if fhi > flo and not (flo - 1e-9 <= f_c[a] <= fhi + 1e-9):
-            raise SceneError(
-                f"actuator {model.actuator(a).name or a}: command {f_c[a]:g} is outside its "
-                f"forcerange [{flo:g}, {fhi:g}]"
-            )
+    opts = SettleOptions() if options is None else options
+    f_c = _settle_commands(model, commands, command)
     t0 = time.perf_counter()
-    G, B = _affine(model)
-    if np.any(np.abs(G[:, 0]) + np.abs(G[:, 1]) < 1e-12):
-        bad = [model.actuator(a).name for a in np.flatnonzero(np.abs(G).sum(axis=1) < 1e-12)]
-        raise SceneError(f"actuator(s) {bad} have zero gain; cannot command their force")
-    feedback = np.abs(B[:, 1]) + np.abs(G[:, 1]) > 0  # force depends on length: rounds
-    if by_ctrl:
-        feedback[:] = False  # controls are set once: no force rounds
-
-    def set_ctrl() -> None:
-        data.ctrl[:] = f_c if by_ctrl else _commanded_ctrl(model, data, f_c, G, B)
-
+    drive = _drive(model, f_c, command == "ctrl")
     mujoco.mj_forward(model, data)
-    set_ctrl()
-    steps = 0
-    with _gravity_off(model):
-        n_grip = int(round(grip_s / model.opt.timestep))
-        for _ in range(n_grip):
-            set_ctrl()  # servos act as pure force sources while the fingers close
-            _step(model, data, ratchet)
-        steps += n_grip
-    done_rounds = 0
-    vmax = np.inf
-    for done_rounds in range(1, rounds + 1):  # noqa: B007
-        k, vmax = _run_until_rest(model, data, vtol, hold_s, 0.0, max_s, ratchet)
-        steps += k
-        if vmax >= vtol:
-            raise SceneError(
-                f"grasp not at rest after {max_s:.1f} s simulated (max |qvel| = {vmax:.3g} "
-                f"> {vtol:g}); the object may have slipped out"
-            )
-        if not feedback.any():
-            break
-        err = np.abs(data.actuator_force - f_c)
-        if np.all(err <= ftol * (1 + np.abs(f_c))) or done_rounds == rounds:
-            break  # converged, or out of rounds: keep the state at rest
-        set_ctrl()
+    drive.apply(model, data)
+    steps = _grip(model, data, drive, opts.grip_s, ratchet)
+    k, done_rounds, vmax = _force_rounds(model, data, drive, opts, ratchet)
+    steps += k
     mujoco.mj_forward(model, data)
-    err = np.abs(data.actuator_force - f_c) if model.nu else np.zeros(0)
-    lo, hi = model.actuator_ctrlrange.T
-    pinned = model.actuator_ctrllimited.astype(bool) & (
-        np.isclose(data.ctrl, lo) | np.isclose(data.ctrl, hi)
-    )
-    bad = np.flatnonzero(pinned & (err > force_tol * (1 + np.abs(f_c))) & (not by_ctrl))
-    if bad.size:  # the command needs a ctrl beyond ctrlrange: it cannot be given
-        a = int(bad[0])
-        raise SceneError(
-            f"actuator {model.actuator(a).name or a} gives {data.actuator_force[a]:.4g} at "
-            f"rest, not the commanded {f_c[a]:.4g}: its ctrl {data.ctrl[a]:.4g} is at the end "
-            f"of ctrlrange [{lo[a]:g}, {hi[a]:g}] (force_tol {force_tol:g})"
-        )
+    _check_reached(model, data, drive, opts.force_tol)
     if object_body is not None:
         _check_held(model, data, object_body)
     return SettleInfo(
@@ -403,7 +501,7 @@ def settle(
         commands=f_c,
         rounds=done_rounds,
         force_error=float(np.abs(data.actuator_force - f_c).max())
-        if model.nu and not by_ctrl
+        if model.nu and not drive.by_ctrl
         else 0.0,
         contacts=int(data.ncon),
     )
@@ -481,7 +579,9 @@ def load_scene(
         ``seat`` the grasp settles with ``preload`` and the ratchet goes on afterwards.
     gravity : False switches the scene's gravity off (``model.opt.gravity = 0``) for good,
         e.g. to map loads that stand for the object's own weight turned around (pouring).
-    settle_kwargs : passed to :func:`settle` (``vtol``, ``hold_s``, ...).
+    settle_kwargs : fields of :class:`SettleOptions` for :func:`settle` (``vtol``,
+        ``hold_s``, ...); the seated protocol's settles default to ``grip_s=0``,
+        ``rounds=1`` (and ``vtol=1e-3`` for the ratcheted one).
 
     Returns
     -------
@@ -522,16 +622,17 @@ def load_scene(
         data.ctrl[:] = 0.0
         mujoco.mj_forward(model, data)
     elif seat_c is None:
-        report = settle(model, data, f_c, **settle_kwargs)
+        report = settle(model, data, f_c, options=SettleOptions(**settle_kwargs))
     else:
+        seated = replace(SettleOptions(grip_s=0.0, rounds=1), **settle_kwargs)
         with _gravity_off(model):  # the object placed in the hand, the fingers closed lightly
-            settle(model, data, seat_c, **{"grip_s": 0.0, "rounds": 1, **settle_kwargs})
+            settle(model, data, seat_c, options=seated)
         ratchet = transmission_ratchet(model, data)
         # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
         # spread servo and thumb, the elliptic friction cones against the stiff stops) while
         # positions stay within micrometres: rest means |qvel| < 1e-3 here
-        kw = {"grip_s": 0.0, "rounds": 1, "vtol": 1e-3, **settle_kwargs}
-        report = settle(model, data, f_c, ratchet=ratchet, **kw)
+        loaded = replace(SettleOptions(grip_s=0.0, rounds=1, vtol=1e-3), **settle_kwargs)
+        report = settle(model, data, f_c, options=loaded, ratchet=ratchet)
     if nonbackdrivable and ratchet is None:
         ratchet = transmission_ratchet(model, data)
     return LoadedScene(model, data, report, ratchet)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,11 +37,12 @@ from stability.io import write_csv
 from stability.maps import ResistibleMap, plane_axes, plot_resistible, radial_top
 
 from . import scenes
-from .resistance import simulated_resistance
+from .resistance import ResistanceOptions, simulated_resistance
 
 __all__ = [
     "METHODS",
     "MapError",
+    "MapSpec",
     "agreement",
     "analysis_map",
     "check_options",
@@ -59,6 +61,38 @@ class MapError(GraspError):
 
 
 FRAMES = ("world", "object")
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """One resistible-force map of a scene: the settled grasp and the forces that load it.
+
+    ``scene``: a scene of ``assets/scenes`` (:func:`ihm.scenes.available_scenes`);
+    ``plane``: two force axes (``"xy"``, ``"xz"``, ``"yz"``, ...); ``directions``: how many
+    unit forces ``u = cos(a) e_1 + sin(a) e_2``, ``a = 2 pi k / directions`` [rad] from the
+    plane's first axis towards its second; ``frame``: the plane's axes are the world's
+    (``"world"``: the palm frame) or the object's at rest (``"object"``: the thesis' axes, as
+    each scene documents them); ``preload``: commanded actuator forces, one per actuator, in
+    each actuator's unit (N m for joint motors, N for tendons; None: the scene's
+    ``ihm_preload``); ``nonbackdrivable``: ratchet the motor joints and actuated tendons
+    (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
+    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``gravity=False``: no
+    gravity anywhere (the mapped force stands for the object's weight turned around, and the
+    stability methods get no base load); ``cap``: the largest force tried or asked [N]."""
+
+    scene: str
+    plane: str = "xy"
+    directions: int = 360
+    preload: ArrayLike | None = None
+    nonbackdrivable: bool = False
+    seat: ArrayLike | None = None
+    frame: str = "world"
+    gravity: bool = True
+    cap: float = 10.0
+
+    def check(self, method: str, workers: int = 1) -> None:
+        """:func:`check_options` on this map, for ``method`` on ``workers`` processes."""
+        check_options(self.plane, method, self.directions, workers, self.cap, self.frame)
 
 
 def check_options(plane: str, method: str, directions: int, workers: int, cap: float,
@@ -96,13 +130,12 @@ _STATE: dict[str, Any] = {}
 _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION  # positions, velocities, controls, applied loads
 
 
-def _settled_state(
-    scene: str, preload: Any, nonbackdrivable: bool, seat: Any, gravity: bool = True
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Settle the scene (errors surface here, in the calling process); its state, the
+def _settled_state(spec: MapSpec) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Settle the map's scene (errors surface here, in the calling process); its state, the
     ratchet's stops (None unless nonbackdrivable) and the object's orientation at rest."""
-    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                               seat=seat, gravity=gravity)  # fmt: skip
+    pre = None if spec.preload is None else np.asarray(spec.preload, dtype=float)
+    loaded = scenes.load_scene(spec.scene, preload=pre, nonbackdrivable=spec.nonbackdrivable,
+                               seat=spec.seat, gravity=spec.gravity)  # fmt: skip
     model, data = loaded
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
@@ -131,7 +164,8 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
         ratchet.stops = _STATE["stops"]
     try:
         opts = {"check_rate": False, "stop_rule": "distance", **kw}  # the maps' documented rule
-        res = simulated_resistance(m, d, direction, cap=cap, ratchet=ratchet, **opts)
+        options = ResistanceOptions(cap=cap, **opts)
+        res = simulated_resistance(m, d, direction, ratchet=ratchet, options=options)
     finally:
         if ratchet is not None:
             ratchet.release()
@@ -139,47 +173,40 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
 
 
 def simulated_map(
-    scene: str,
-    plane: str = "xy",
-    directions: int = 360,
+    spec: MapSpec,
     *,
-    preload: ArrayLike | None = None,
-    nonbackdrivable: bool = False,
-    seat: ArrayLike | None = None,
-    frame: str = "world",
-    gravity: bool = True,
-    cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
     ray: str | None = None,
     **resistance_kwargs: float,
 ) -> ResistibleMap:
-    """Simulated resistible force per direction in ``plane`` (module doc).
+    """Simulated resistible force per direction of ``spec`` (module doc, :class:`MapSpec`).
 
-    ``preload``: commanded actuator forces (default: the scene's ``ihm_preload``);
-    ``nonbackdrivable``: ratchet the motor joints and actuated tendons
-    (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
-    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``frame``: the plane's
-    axes are the world's (``"world"``) or the object's at rest (``"object"``: the thesis'
-    axes, as each scene documents them); ``gravity=False``: no gravity anywhere (the mapped
-    force stands for the object's weight turned around); ``ray``: run the directions as Ray
-    tasks on that cluster (``"auto"``, ``"local"`` or an address; :mod:`stability.batch`)
-    instead of ``workers`` local processes; ``resistance_kwargs`` go to
-    :func:`ihm.resistance.simulated_resistance` (``rate``, ``max_shift``, ...).
+    ``workers`` local processes run the directions (the same numbers for any number);
+    ``ray``: run them as Ray tasks on that cluster instead (``"auto"``, ``"local"`` or an
+    address; :mod:`stability.batch`); ``progress``: a bar; ``resistance_kwargs`` go to
+    :class:`ihm.resistance.ResistanceOptions` (``rate``, ``max_shift``, ...).
     """
-    check_options(plane, "sim", directions, workers, cap, frame)
-    scenes.scene_path(scene)  # unknown scene: SceneError before any worker starts
-    angles, units = _directions(plane, directions)
-    pre = None if preload is None else np.asarray(preload, dtype=float)
-    state, stops, rot = _settled_state(scene, pre, nonbackdrivable, seat, gravity)
-    if frame == "object":
+    spec.check("sim", workers)
+    scenes.scene_path(spec.scene)  # unknown scene: SceneError before any worker starts
+    angles, units = _directions(spec.plane, spec.directions)
+    state, stops, rot = _settled_state(spec)
+    if spec.frame == "object":
         units = units @ rot.T
-    dirs = [(np.r_[u, 0.0, 0.0, 0.0], float(cap), resistance_kwargs) for u in units]
-    out = _map_jobs(_one, dirs, workers, _init, (scene, state, stops, gravity), progress,
-                    f"{scene} sim map", ray)  # fmt: skip
+    cap = float(spec.cap)
+    dirs = [(np.r_[u, 0.0, 0.0, 0.0], cap, resistance_kwargs) for u in units]
+    out = _map_jobs(_one, dirs, workers, _init, (spec.scene, state, stops, spec.gravity),
+                    progress, f"{spec.scene} sim map", ray)  # fmt: skip
+    return _result(angles, out, spec, "sim")
+
+
+def _result(
+    angles: np.ndarray, out: list[tuple[float, bool]], spec: MapSpec, method: str
+) -> ResistibleMap:
+    """The map of the per-direction ``(value, capped)`` answers ``out``."""
     mags = np.array([v for v, _ in out])
     capped = np.array([c for _, c in out], dtype=bool)
-    return ResistibleMap(angles, mags, capped, float(cap), plane, "sim")
+    return ResistibleMap(angles, mags, capped, float(spec.cap), spec.plane, method)
 
 
 def _init_analysis(grasp: Any, commands: np.ndarray, com: np.ndarray, method: str,
@@ -214,62 +241,42 @@ def map_value(sol: Any) -> tuple[float, bool]:
 
 
 def analysis_map(
-    scene: str,
-    plane: str = "xy",
-    directions: int = 360,
+    spec: MapSpec,
     *,
     method: str = DEFAULT_SPATIAL_METHOD,
-    preload: ArrayLike | None = None,
-    nonbackdrivable: bool = False,
-    seat: ArrayLike | None = None,
-    frame: str = "world",
-    gravity: bool = True,
-    cap: float = 10.0,
     workers: int = 1,
     progress: bool = True,
     ray: str | None = None,
     **options: Any,
 ) -> ResistibleMap:
-    """The stability method's resistible force per direction on the settled scene's grasp
-    (module doc); ``options`` go to :func:`stability.solve` (``time_limit``, ...).
-    ``nonbackdrivable`` and ``seat`` settle the scene as :func:`simulated_map` does, so that
-    both read the same grasp (the methods model every actuator as nonbackdrivable);
-    ``frame``, ``gravity`` and ``ray`` as there (no gravity: no base load)."""
-    check_options(plane, method, directions, workers, cap, frame)
+    """The stability method's resistible force per direction of ``spec`` on the settled
+    scene's grasp (module doc); ``options`` go to :func:`stability.solve` (``time_limit``,
+    ...). The scene settles as in :func:`simulated_map` (``nonbackdrivable``, ``seat``), so
+    that both read the same grasp (the methods model every actuator as nonbackdrivable);
+    ``workers``, ``progress`` and ``ray`` as there (no gravity: no base load)."""
+    spec.check(method, workers)
     if method == "sim":
         raise MapError("analysis_map takes a stability method; use simulated_map for 'sim'")
-    grasp, commands, com = _settled_grasp(scene, preload, nonbackdrivable, seat, gravity)
-    angles, units = _directions(plane, directions)
-    if frame == "object":
+    grasp, commands, com = _settled_grasp(spec)
+    angles, units = _directions(spec.plane, spec.directions)
+    if spec.frame == "object":
         units = units @ grasp.object_mat.T
-    jobs = [(u, float(cap)) for u in units]
+    jobs = [(u, float(spec.cap)) for u in units]
     args = (grasp, commands, com, method, options)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
-                    f"{scene} {method} map", ray)  # fmt: skip
-    return ResistibleMap(
-        angles,
-        np.array([v for v, _ in out]),
-        np.array([c for _, c in out], dtype=bool),
-        float(cap),
-        plane,
-        method,
-    )
+                    f"{spec.scene} {method} map", ray)  # fmt: skip
+    return _result(angles, out, spec, method)
 
 
-def _settled_grasp(
-    scene: str,
-    preload: ArrayLike | None,
-    nonbackdrivable: bool,
-    seat: ArrayLike | None,
-    gravity: bool,
-) -> tuple[Any, np.ndarray, np.ndarray]:
-    """The settled scene's grasp (:class:`ihm.contacts.SceneGrasp`), the commands it was
+def _settled_grasp(spec: MapSpec) -> tuple[Any, np.ndarray, np.ndarray]:
+    """The map's settled scene's grasp (:class:`ihm.contacts.SceneGrasp`), the commands it was
     settled with (one per column of its ``R``: ``SceneGrasp.full_commands``) and the object's
     centre of mass in the object frame."""
     from .contacts import grasp_from_mujoco
 
-    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=nonbackdrivable,
-                               seat=seat, gravity=gravity)  # fmt: skip
+    preload = spec.preload
+    loaded = scenes.load_scene(spec.scene, preload=preload, nonbackdrivable=spec.nonbackdrivable,
+                               seat=spec.seat, gravity=spec.gravity)  # fmt: skip
     model, data = loaded
     if loaded.ratchet is not None:
         loaded.ratchet.release()
@@ -288,35 +295,29 @@ def _rigid(grasp: Any) -> Any:
 
 
 def scene_map_rows(
-    scene: str,
-    plane: str = "xy",
-    directions: int = 36,
+    spec: MapSpec,
     *,
     method: str = DEFAULT_SPATIAL_METHOD,
-    preload: ArrayLike | None = None,
-    nonbackdrivable: bool = False,
-    seat: ArrayLike | None = None,
-    frame: str = "world",
-    gravity: bool = True,
-    cap: float = 10.0,
     options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """The queries of :func:`analysis_map` as batch rows (:mod:`stability.batch`): one
     MaxDisturbance per direction on the settled scene's grasp, the force through the object's
     centre of mass, its weight as base load, the settled commands (``gws``: the rigid grasp,
-    no commands). Ids ``"<scene>-<plane>-<k>"``. ``python -m stability.batch`` on them gives
-    the map's values (tested)."""
-    from stability.batch import map_rows
+    no commands); ``method`` and ``options`` are written into each row. Ids
+    ``"<scene>-<plane>-<k>"``. ``python -m stability.batch`` on them gives the map's values
+    (tested)."""
+    from stability.batch import MapPlane, map_rows
 
-    check_options(plane, method, directions, 1, cap, frame)
+    spec.check(method)
     if method == "sim":
         raise MapError("batch rows take a stability method, not 'sim'")
-    g, commands, com = _settled_grasp(scene, preload, nonbackdrivable, seat, gravity)
+    g, commands, com = _settled_grasp(spec)
     rigid = method == "gws"  # a rigid-hand method: the contacts only, no commands
-    return map_rows(_rigid(g) if rigid else g, plane=plane, directions=directions, cap=cap,
-                    base=g.gravity_wrench, commands=None if rigid else commands, torque_point=com,
-                    rotation=None if frame == "object" else g.object_mat,
-                    id_prefix=f"{scene}-{plane}", method=method, options=options)  # fmt: skip
+    rotation = None if spec.frame == "object" else g.object_mat
+    where = MapPlane(spec.plane, spec.directions, torque_point=com, rotation=rotation)
+    return map_rows(_rigid(g) if rigid else g, where, cap=spec.cap, base=g.gravity_wrench,
+                    commands=None if rigid else commands, id_prefix=f"{spec.scene}-{spec.plane}",
+                    method=method, options=options)  # fmt: skip
 
 
 def _with_init(token: str, init: Any, initargs: tuple, fn: Any, job: Any) -> Any:
@@ -426,59 +427,61 @@ def plot_maps(path: Path, maps: Sequence[tuple[str, ResistibleMap]], title: str)
 
 
 def run(
-    scene: str,
-    plane: str,
-    directions: int,
+    spec: MapSpec,
     preloads: Sequence[ArrayLike | None],
-    nonbackdrivable: bool,
-    cap: float,
-    workers: int,
     out: Path,
-    progress: bool = True,
+    *,
     methods: Sequence[str] = ("sim",),
-    seat: ArrayLike | None = None,
-    frame: str = "world",
+    workers: int = 1,
+    progress: bool = True,
     ray: str | None = None,
     **options: Any,
 ) -> tuple[Path, Path, list[float], list[tuple[str, str, dict[str, float]]]]:
-    """The CLI's work: one map per method and preload, CSV + PNG; returns their paths, the
-    wall time of each map [s] and, for every stability-method map with a ``sim`` map of the
-    same commands, its :func:`agreement` with it (also written to ``*_agreement.csv``)."""
+    """The CLI's work: one map of ``spec`` per method and per entry of ``preloads`` (each
+    replaces ``spec.preload``; None: the scene's own), CSV + PNG in ``out``; returns their
+    paths, the wall time of each map [s] and, for every stability-method map with a ``sim``
+    map of the same commands, its :func:`agreement` with it (also written to
+    ``*_agreement.csv``). ``workers``, ``progress`` and ``ray`` as in :func:`simulated_map`;
+    ``options`` go to :func:`analysis_map`."""
     maps, walls, keys = [], [], []
     for method in methods:
         for pre in preloads:
             t = time.perf_counter()
+            one = replace(spec, preload=pre)
             if method == "sim":
-                rm = simulated_map(
-                    scene, plane, directions, preload=pre, nonbackdrivable=nonbackdrivable,
-                    seat=seat, frame=frame, cap=cap, workers=workers, progress=progress, ray=ray,
-                )  # fmt: skip
+                rm = simulated_map(one, workers=workers, progress=progress, ray=ray)
             else:
-                rm = analysis_map(
-                    scene, plane, directions, method=method, preload=pre,
-                    nonbackdrivable=nonbackdrivable, seat=seat, frame=frame, cap=cap,
-                    workers=workers, ray=ray,
-                    progress=progress, **options,
-                )  # fmt: skip
+                rm = analysis_map(one, method=method, workers=workers, progress=progress,
+                                  ray=ray, **options)  # fmt: skip
             walls.append(time.perf_counter() - t)
             what = (
                 "default commands" if pre is None else "commands " + " ".join(f"{x:g}" for x in pre)
             )
-            tag = ", ratcheted" if (method == "sim" and nonbackdrivable) else ""
+            tag = ", ratcheted" if (method == "sim" and spec.nonbackdrivable) else ""
             maps.append((f"{method}, {what}{tag}", rm))
             keys.append((method, what))
-    stem = f"{scene}_{plane}" + ("_object" if frame == "object" else "")
+    stem = f"{spec.scene}_{spec.plane}" + ("_object" if spec.frame == "object" else "")
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
-    title = f"{scene}: resistible force in the {frame} {plane} plane [N] (cap {cap:g} N)"
+    title = (f"{spec.scene}: resistible force in the {spec.frame} {spec.plane} plane [N] "
+             f"(cap {spec.cap:g} N)")  # fmt: skip
     png = plot_maps(out / f"{stem}.png", maps, title)
-    sims = {what: rm for (method, what), (_, rm) in zip(keys, maps, strict=True) if method == "sim"}
-    agree = []
-    for (method, what), (label, rm) in zip(keys, maps, strict=True):
-        if method != "sim" and what in sims:
-            agree.append((label, what, agreement(rm, sims[what])))
+    agree = _agreements(maps, keys)
     if agree:
         write_csv(
             out / f"{stem}_agreement.csv",
             [{"map": label, "commands": what, **a} for label, what, a in agree],
         )
     return csv_path, png, walls, agree
+
+
+def _agreements(
+    maps: list[tuple[str, ResistibleMap]], keys: list[tuple[str, str]]
+) -> list[tuple[str, str, dict[str, float]]]:
+    """``(label, commands, agreement)`` of every stability-method map (``keys``: its method
+    and commands) with the ``sim`` map of the same commands, where there is one."""
+    sims = {what: rm for (method, what), (_, rm) in zip(keys, maps, strict=True) if method == "sim"}
+    agree = []
+    for (method, what), (label, rm) in zip(keys, maps, strict=True):
+        if method != "sim" and what in sims:
+            agree.append((label, what, agreement(rm, sims[what])))
+    return agree

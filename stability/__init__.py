@@ -5,14 +5,18 @@
 >>> g = Grasp(points=[[-1, 0], [0, -1], [1, 0]], normals=[[1, 0], [0, 1], [-1, 0]], mu=0.5)
 >>> solve(g, Existence(wrench=[0, -1, 0]), method="planar").stable
 True
+
+Each method's options are a frozen dataclass (``method_info(name).options``), which
+``solve(..., **options)`` builds and checks once.
 """
 
 from . import exact, gws, iterative, modesearch, no_mdp, planar, refinement  # noqa: F401  (registers the methods)
-from .api import available_methods, register, solve
+from .api import available_methods, method_info, register, solve
 from .errors import GraspError, MethodError, ModelError, SolverError
 from .grasp import Grasp
+from .options import Deadline, MethodOptions
 from .queries import Existence, MaxDisturbance, OptimalCommands, Query
-from .solution import Solution
+from .solution import Solution, Stats
 
 __all__ = [
     "Existence",
@@ -23,9 +27,13 @@ __all__ = [
     "ModelError",
     "OptimalCommands",
     "Query",
+    "Deadline",
+    "MethodOptions",
     "Solution",
     "SolverError",
+    "Stats",
     "available_methods",
+    "method_info",
     "register",
     "solve",
 ]

@@ -87,9 +87,10 @@ The box. Every bound above holds for motions inside the box (``bound_factor``, d
 :data:`EXACT_BOUND_FACTOR` = 100 times the force scale). An optimisation answer whose
 motion reaches it (``stats["box_reached"]``: a tangential, object or joint motion at 99 %
 of its bound) may have been cut off there: the box grows tenfold and the query is solved
-again, at most :data:`BOX_RETRIES` times within the same time limit
-(``stats["box_enlarged"]`` lists the solves). A larger box's answer replaces the smaller's
-when it is solved; a time-out or an error there leaves the answer found. An answer (or a
+again within the same deadline, at most :data:`~stability.options.BOX_RETRIES` times
+(:func:`~stability.options.enlarge_box`; ``stats["box_enlarged"]`` lists the
+enlargements). A larger box's answer replaces the smaller's when it is solved; a
+time-out or an error there leaves the answer found. An answer (or a
 time-out's checked incumbent) still at its box has no dual-bound side (MaxDisturbance
 ``upper``, OptimalCommands ``lower`` None) and is not certified. A larger default box is
 slower where it does not bind, hence 100 and the retries.

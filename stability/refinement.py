@@ -82,7 +82,8 @@ The box (``bound_factor``, default :data:`REFINEMENT_BOUND_FACTOR` = 1e3 here, 1
 other methods): forces, separations, transmission motions and slide weights are bounded
 by it times the query's force scale. An exact point beyond the relaxation's bound shows
 that the box cut the optimum off: the box grows tenfold and the query is solved again
-(``stats["box_enlarged"]``, at most :data:`BOX_RETRIES` times).
+(``stats["box_enlarged"]``, at most :data:`~stability.options.BOX_RETRIES` times:
+:func:`~stability.options.enlarge_box`).
 """
 
 from __future__ import annotations
@@ -100,11 +101,12 @@ from .api import register
 from .grasp import Grasp
 from .mip import INF
 from .mip.model import Row
-from .model.coulomb import certify, exact_conditions, stuck_point
+from .model.coulomb import exact_conditions
 from .model.edges import TWO_PI, EdgeSet, edge_length
 from .model.problem import ExactBounds, ExactPoint, ExactProblem, scale_bounds
 from .model.query import QueryData, add_query, query_value
 from .model.run import CONDITIONS, MipOptions, Stop, bounds_stats, run, solution, stopped
+from .model.slides import certify, stuck_point
 from .options import Deadline, check_ranges, enlarge_box, finite
 from .queries import Existence, MaxDisturbance, OptimalCommands
 from .solution import Solution
@@ -338,9 +340,7 @@ def _solve(grasp: Grasp, query: Any, opts: RefinementOptions, deadline: Deadline
     g, q = opts.gamma, opts.levels
     k0 = opts.initial_edges * 2 ** (opts.start - 1)
     edges = [EdgeSet.uniform(k0, opts.start, g, q) for _ in range(grasp.m)]
-    conditions = tuple(c for c in CONDITIONS if c != "friction_cone")
-    if opts.normal_uncertainty > 0:
-        conditions = tuple(c for c in conditions if c != "spring_law")
+    conditions = _relaxed_conditions(opts)
     trace: list[dict[str, Any]] = []
     stats["rounds"] = trace
     cap0 = data.cap
@@ -416,6 +416,29 @@ def _solve(grasp: Grasp, query: Any, opts: RefinementOptions, deadline: Deadline
     stats["cone_excess_bound"] = edge_length(q + 1, g, q) - 1.0
     if best is not None:  # the finest level reached, the bracket still open: the exact point
         return _answer(method, grasp, query, stats, best, relaxed, opts, data, cap0, False)
+    return _unproven(grasp, query, opts, deadline, stats, data, (rel, pt, var), relaxed, cap0)
+
+
+def _relaxed_conditions(opts: RefinementOptions) -> tuple[str, ...]:
+    """The model conditions a relaxation's answer meets: not the exact friction cone (its
+    polygon is outside it by at most ``cone_excess_bound``), nor the spring law under
+    normal uncertainty."""
+    conditions = tuple(c for c in CONDITIONS if c != "friction_cone")
+    if opts.normal_uncertainty > 0:
+        conditions = tuple(c for c in conditions if c != "spring_law")
+    return conditions
+
+
+def _unproven(grasp: Grasp, query: Any, opts: RefinementOptions, deadline: Deadline,
+              stats: dict[str, Any], data: QueryData, last: tuple, relaxed: float | None,
+              cap0: float) -> Solution:  # fmt: skip
+    """The finest level reached without an exact point: Existence has no answer; an
+    optimisation query probes (MaxDisturbance, :func:`_probe`) or is bracketed on one side;
+    with ``certify=False``, the last round's relaxed answer (``last``: its relaxation,
+    point and query variable), flagged uncertified."""
+    method = "refinement"
+    rel, pt, var = last
+    conditions = _relaxed_conditions(opts)
     if data.direction is None and data.command_range is None:  # Existence
         stats["certified"] = False
         stats["reason"] = ("the relaxation is feasible at the finest level, but no exact "

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Mapping, MutableMapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,7 +12,14 @@ from numpy.typing import NDArray
 from .grasp import Grasp
 from .queries import Existence, MaxDisturbance, Query
 
-__all__ = ["MODEL_CONDITIONS", "SLIDE_TOL", "Solution", "model_residuals", "slide_alignment"]
+__all__ = [
+    "MODEL_CONDITIONS",
+    "SLIDE_TOL",
+    "Solution",
+    "Stats",
+    "model_residuals",
+    "slide_alignment",
+]
 
 # every key model_residuals can return, in its order
 MODEL_CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation",
@@ -125,6 +132,93 @@ def slide_alignment(
     return float(np.max(np.linalg.norm(miss, axis=1), initial=0.0))
 
 
+class Stats(MutableMapping[str, Any]):
+    """A solve's statistics: a dict of the method's own keys, with the keys every method
+    shares read as typed attributes (None where the method did not set the key).
+
+    ``stats["nodes"]`` and ``stats.nodes`` read the same entry; entries are written by key.
+    Wrapping a dict does not copy it: what the method adds to it later is seen here.
+    """
+
+    def __init__(self, data: Mapping[str, Any] | None = None) -> None:
+        self._data: dict[str, Any] = (
+            data if isinstance(data, dict) else dict(data or {})
+        )  # the method's dict itself, not a copy
+
+    def __getitem__(self, key: str) -> Any:
+        return self._data[key]
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._data[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._data[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return f"Stats({self._data!r})"
+
+    def copy(self) -> dict[str, Any]:
+        """A plain dict of the entries."""
+        return dict(self._data)
+
+    @property
+    def time_s(self) -> float | None:
+        """Wall time of the method call [s] (set by :func:`stability.solve`)."""
+        return self._data.get("time_s")
+
+    @property
+    def message(self) -> str | None:
+        """Why the status is not ``"solved"``, or what else to know about the answer."""
+        return self._data.get("message")
+
+    @property
+    def reason(self) -> str | None:
+        """Why the answer is what it is (an infeasible model, a limit reached, ...)."""
+        return self._data.get("reason")
+
+    @property
+    def backend(self) -> str | None:
+        """The solver the method used (``"highs"``, ``"scip"``, ``"gurobi"``)."""
+        return self._data.get("backend")
+
+    @property
+    def certified(self) -> bool | None:
+        """The bracket ``[lower, upper]`` is closed to the method's tolerance."""
+        return self._data.get("certified")
+
+    @property
+    def capped(self) -> bool | None:
+        """MaxDisturbance: the value reached the query's cap ("at least cap")."""
+        return self._data.get("capped")
+
+    @property
+    def force_bound(self) -> float | None:
+        """The model's force bound ``B`` [N] (the box's scale)."""
+        return self._data.get("force_bound")
+
+    @property
+    def box_reached(self) -> bool | str | None:
+        """The answer reaches the model's box (a string says how): its dual bound holds
+        only inside the box."""
+        return self._data.get("box_reached")
+
+    @property
+    def box_enlarged(self) -> list[str] | None:
+        """One line per tenfold enlargement of the box (:func:`stability.options.enlarge_box`)."""
+        return self._data.get("box_enlarged")
+
+    @property
+    def nodes(self) -> int | None:
+        """Branch-and-bound nodes (the MIPs' or the mode search's)."""
+        return self._data.get("nodes")
+
+
 @dataclass
 class Solution:
     """Answer of one method to one query.
@@ -151,8 +245,10 @@ class Solution:
     states : (m,) array of str or None
         Per-contact state: planar ``"roll"``, ``"slip+"``, ``"slip-"``, ``"detach"``;
         the 3D MIP methods ``"stick"``, ``"slip"`` (tangential motion), ``"detach"``.
-    stats : dict
-        At least ``time_s``; methods add counts (states visited, LPs solved, ...).
+    stats : Stats
+        A dict-like :class:`Stats`: at least ``time_s``; methods add counts (states
+        visited, LPs solved, ...); the keys every method shares are typed attributes
+        (``stats.time_s``, ``stats.certified``, ...).
     status : str
         ``"solved"`` (``stable`` is the answer), ``"timeout"`` (the method's ``time_limit``
         ran out), ``"not_converged"`` (an iterative scheme hit its iteration cap or
@@ -192,7 +288,7 @@ class Solution:
     hand_motion: NDArray[np.float64] | None = None
     value: float | None = None
     states: NDArray[np.str_] | None = None
-    stats: dict[str, Any] = field(default_factory=dict)
+    stats: Stats = field(default_factory=Stats)
     status: str = "solved"
     actuator_forces: NDArray[np.float64] | None = None
     hand_reference: NDArray[np.float64] | None = None
@@ -200,6 +296,10 @@ class Solution:
     commands: NDArray[np.float64] | None = None
     lower: float | None = None
     upper: float | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.stats, Stats):
+            self.stats = Stats(self.stats)
 
     @property
     def wrench(self) -> NDArray[np.float64]:

@@ -23,8 +23,8 @@ from stability.maps import ResistibleMap, plot_resistible
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
-from ..resistance import simulated_resistance, touching_bodies
-from ..sim_maps import agreement, analysis_map, map_value, simulated_map, write_map_csv
+from ..resistance import ResistanceOptions, simulated_resistance, touching_bodies
+from ..sim_maps import MapSpec, agreement, analysis_map, map_value, simulated_map, write_map_csv
 
 __all__ = ["box", "box_3d", "cube", "flask"]
 
@@ -47,14 +47,14 @@ def _maps(
 ) -> tuple[list[tuple[str, ResistibleMap]], dict[str, float]]:
     """One map per (label, method, options) on the same settled grasp; wall times [s]."""
     out, walls = [], {}
-    common = dict(preload=preload, nonbackdrivable=True, seat=seat, frame="object",
-                  gravity=gravity, cap=cap, workers=workers, progress=False)  # fmt: skip
+    spec = MapSpec(scene, plane, n, preload=preload, nonbackdrivable=True, seat=seat,
+                   frame="object", gravity=gravity, cap=cap)  # fmt: skip
     for label, method, opts in methods:
         t = time.perf_counter()
         if method == "sim":
-            rm = simulated_map(scene, plane, n, **common)
+            rm = simulated_map(spec, workers=workers, progress=False)
         else:
-            rm = analysis_map(scene, plane, n, method=method, **common, **opts)
+            rm = analysis_map(spec, method=method, workers=workers, progress=False, **opts)
         walls[label] = time.perf_counter() - t
         out.append((label, rm))
     return out, walls
@@ -190,8 +190,8 @@ def _simulate(model, data, ratchet, direction_obj: np.ndarray, cap: float, at_co
     if not at_com:
         tq = tq + np.cross(-model.body_ipos[b], f)
     w = np.r_[R @ f, R @ tq]
-    return simulated_resistance(model, data, w, cap=cap, ratchet=ratchet, check_rate=False,
-                                stop_rule="distance")  # fmt: skip
+    opts = ResistanceOptions(cap=cap, check_rate=False, stop_rule="distance")
+    return simulated_resistance(model, data, w, ratchet=ratchet, options=opts)
 
 
 def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:

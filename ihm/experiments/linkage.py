@@ -38,7 +38,7 @@ from stability.io import write_csv
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
-from ..resistance import simulated_resistance
+from ..resistance import ResistanceOptions, simulated_resistance
 
 __all__ = ["CONTACT_SETS", "DIRECTIONS", "linkage_box"]
 
@@ -103,7 +103,8 @@ def simulate(direction: str, impratio: float | None = None) -> dict[str, Any]:
     mujoco.mj_resetDataKeyframe(model, data, model.key("init").id)
     scenes.settle(model, data, scenes.default_preload(model))
     t0 = time.perf_counter()
-    res = simulated_resistance(model, data, _unit(direction), cap=CAP_N)
+    res = simulated_resistance(model, data, _unit(direction),
+                               options=ResistanceOptions(cap=CAP_N))  # fmt: skip
     rc = res.rate_check or {}
     return {
         "value": float(res.value),

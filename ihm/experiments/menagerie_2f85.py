@@ -34,7 +34,7 @@ from stability import Existence, MaxDisturbance, solve
 from stability.io import write_csv
 
 from ..contacts import HandModelError, HandOptions, grasp_from_mujoco
-from ..resistance import simulated_resistance
+from ..resistance import ResistanceOptions, simulated_resistance
 from ..scenes import settle
 
 __all__ = ["build", "main"]
@@ -82,7 +82,7 @@ def run(path: str | Path, time_limit: float = 30.0) -> list[dict[str, Any]]:
         m2, d2 = fresh()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            r = simulated_resistance(m2, d2, _unit(name), cap=100.0)
+            r = simulated_resistance(m2, d2, _unit(name), options=ResistanceOptions(cap=100.0))
         sim[name] = r.value
         rows.append({"kind": "simulated", "variant": f"impratio {m2.opt.impratio:g}",
                      "direction": name, "value": r.value, "reason": r.reason,

@@ -31,6 +31,7 @@ runner writes to ``OUT/tendon_box_summary.json``.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +44,8 @@ from stability.io import write_csv
 
 from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
-from ..resistance import simulated_resistance
-from ..sim_maps import agreement, analysis_map, simulated_map
+from ..resistance import ResistanceOptions, simulated_resistance
+from ..sim_maps import MapSpec, agreement, analysis_map, simulated_map
 
 __all__ = [
     "CASES",
@@ -151,9 +152,9 @@ def _simulate(commands: tuple[float, float], sign: float) -> dict[str, Any]:
     scene, grasp = settle_case(commands)
     axis_world = grasp.object_mat[:, 0]
     direction = np.r_[0.0, 0.0, 0.0, sign * axis_world]
-    res = simulated_resistance(scene.model, scene.data, direction, cap=TORQUE_CAP_NM,
-                               ratchet=scene.ratchet, check_rate=False,
-                               stop_rule="distance")  # fmt: skip
+    opts = ResistanceOptions(cap=TORQUE_CAP_NM, check_rate=False, stop_rule="distance")
+    res = simulated_resistance(scene.model, scene.data, direction, ratchet=scene.ratchet,
+                               options=opts)  # fmt: skip
     turned = res.trace[res.trace[:, 2] > ONSET_TURN_RAD]
     onset = float(turned[0, 0]) if len(turned) else float(res.value)
     return {
@@ -314,6 +315,157 @@ def _ratio(a: float, b: float) -> float:
     return float(a / b) if np.isfinite(a) and np.isfinite(b) and b > 0 else float("nan")
 
 
+@dataclass(frozen=True)
+class _Settings:
+    """How hard a run works: refinement ``levels``, the time limits [s] of each torque
+    query (``t_torque``) and of each map direction (``t_map``), and the map's number of
+    ``directions``."""
+
+    levels: int
+    t_torque: float
+    t_map: float
+    directions: int
+
+    @classmethod
+    def of(cls, quick: bool) -> _Settings:
+        """The full run's settings, or the smoke run's (``quick``)."""
+        return cls(3, 20.0, 10.0, 8) if quick else cls(4, 90.0, 20.0, 36)
+
+
+def _preload_case(
+    commands: tuple[float, float], st: _Settings
+) -> tuple[dict[str, Any], tuple[Any, Any, dict[str, Any]], SceneGrasp]:
+    """One preload case settled (:func:`settle_case`): its summary entry (commands [N], the
+    link normal forces [N] in MuJoCo and in the thesis model's equilibrium, the passive
+    tendon tensions [N], joint angles [rad]), what :func:`_draw_grasp` draws of it (model,
+    data and the case's points, normals and forces) and the grasp."""
+    (model, data), grasp = settle_case(commands)
+    axes_err = float(np.abs(grasp.object_mat - np.eye(3)).max())
+    model_f = _model_preload_forces(grasp, commands, {"time_limit": st.t_torque,
+                                                      "levels": st.levels})  # fmt: skip
+    names = [model.body(b).name for b in grasp.hand_bodies]
+    mf = None if model_f is None else dict.fromkeys(LINKS, 0.0)
+    if mf is not None:
+        for name, f in zip(names, model_f[:, 0], strict=True):
+            mf[name] += float(f)
+    info = {
+        "commands_N": list(commands),
+        "links": names,
+        "normal_force_N": link_normal_forces(model, grasp),
+        "model_normal_force_N": mf,
+        "passive_tension_N": dict(zip(("proximal", "distal"),
+                                      passive_tensions(model, data).tolist(), strict=True)),
+        "joint_angles_rad": data.qpos[:4].round(5).tolist(),
+        "object_axes_vs_world_max_abs": axes_err,
+        "contacts": int(grasp.m),
+    }  # fmt: skip
+    drawn = (model, data, {
+        "points_mm": (grasp.points_world()[:, :2] * 1000).tolist(),
+        "normals": grasp.frames_world()[:, 0, :2].tolist(),
+        "fn": grasp.forces[:, 0].tolist(),
+        "model_fn": None if model_f is None else model_f[:, 0].tolist(),
+        "passive_tension_N": passive_tensions(model, data).tolist(),
+        "commands": list(commands),
+    })  # fmt: skip
+    return info, drawn, grasp
+
+
+def _torque_case(
+    case: str,
+    grasp: SceneGrasp,
+    commands: tuple[float, float],
+    st: _Settings,
+    rows: list[list[Any]],
+) -> dict[str, dict[str, dict[str, Any]]]:
+    """The resistances [N m] to the torques ``+-x`` of one case, simulated (and its onset)
+    and by ``refinement`` and ``iterative``, per method and sign; one CSV row each is
+    appended to ``rows``."""
+    res: dict[str, dict[str, dict[str, Any]]] = {"sim": {}, "refinement": {}, "iterative": {}}
+    for sign, label in ((1.0, "+x"), (-1.0, "-x")):
+        res["sim"][label] = _simulate(commands, sign)
+        res["refinement"][label] = _predict(grasp, commands, sign, "refinement",
+                                            time_limit=st.t_torque, levels=st.levels)  # fmt: skip
+        res["iterative"][label] = _predict(grasp, commands, sign, "iterative",
+                                           time_limit=st.t_torque)  # fmt: skip
+        for method in res:
+            r = res[method][label]
+            rows.append([case, method, f"{label} torque", r["value"], "N m", int(r["capped"])])
+        r = res["sim"][label]
+        rows.append([case, "sim_onset", f"{label} torque", r["onset"], "N m", 0])
+    return res
+
+
+def _ratios(torque: dict[str, Any]) -> dict[str, dict[str, float]]:
+    """Distal / proximal resistance per method (the simulated onset as ``sim_onset``) and
+    sign (thesis: about 2)."""
+    ratios = {}
+    for method, key in (("sim", "value"), ("sim_onset", "onset"), ("refinement", "value"),
+                        ("iterative", "value")):  # fmt: skip
+        src = "sim" if method == "sim_onset" else method
+        ratios[method] = {
+            s: _ratio(torque["distal"][src][s][key], torque["proximal"][src][s][key])
+            for s in ("+x", "-x")
+        }
+    return ratios
+
+
+def _plot_cases(
+    path: Path, drawn: dict[str, tuple[Any, Any, dict[str, Any]]], torque: dict[str, Any]
+) -> None:
+    """``tendon_box.png``: the grasp plane per case with its preload contact forces, and
+    the torque resistances as bars."""
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 3, figsize=(17, 5.6), gridspec_kw={"width_ratios": [1, 1, 0.9]})
+    for ax, case in zip(axs[:2], CASES, strict=True):
+        model, data, c = drawn[case]
+        tag = "proximal tendon active, distal passive" if case == "proximal" else (
+            "distal tendon active, proximal passive")  # fmt: skip
+        _draw_grasp(ax, model, data, c, f"{tag}: f_c = {list(CASES[case])} N\n"
+                    "preload contact normal forces (weight 0.98 N along +y)")  # fmt: skip
+    _draw_bars(axs[2], torque)
+    fig.suptitle("tendon_box (thesis grasp example 3): proximal vs distal tendon, "
+                 f"F = {FORCE_N:g} N, nonbackdrivable", fontsize=11)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _xy_map(out: Path, st: _Settings, workers: int, rows: list[list[Any]]) -> dict[str, Any]:
+    """The xy-plane map of the distal-only preload (thesis fig. underactuated), simulated
+    and by ``refinement`` [N]: drawn to ``tendon_box_xy.png``, one CSV row per direction
+    and method appended to ``rows``; returns its summary entry."""
+    commands = CASES["distal"]
+    spec = MapSpec(SCENE, "xy", st.directions, preload=commands, nonbackdrivable=True,
+                   seat=SEAT_N, cap=FORCE_CAP_N)  # fmt: skip
+    t0 = time.perf_counter()
+    sim = simulated_map(spec, workers=workers, progress=False)
+    t_sim = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pred = analysis_map(spec, method="refinement", workers=workers, progress=False,
+                        time_limit=st.t_map, levels=st.levels)  # fmt: skip
+    t_pred = time.perf_counter() - t0
+    agree = agreement(pred, sim)
+    for rm in (sim, pred):
+        for a, v, c in zip(rm.angles, rm.magnitudes, rm.capped, strict=True):
+            rows.append(["distal", rm.method, f"xy {np.degrees(a):.0f} deg", float(v), "N", int(c)])
+    _plot_xy(out / "tendon_box_xy.png", sim, pred,
+             f"tendon_box, distal tendon only (F = {FORCE_N:g} N): resistible force [N] in the "
+             f"xy-plane\n0 deg = +x (pushes the box into the right finger), 90 deg = +y "
+             f"(out of the hand)")  # fmt: skip
+    return {
+        "directions": st.directions,
+        "cap_N": FORCE_CAP_N,
+        "angles_deg": np.degrees(sim.angles).round(2).tolist(),
+        "sim_N": sim.magnitudes.tolist(),
+        "sim_capped": sim.capped.tolist(),
+        "refinement_N": pred.magnitudes.tolist(),
+        "refinement_capped": pred.capped.tolist(),
+        "agreement": agree,
+        "wall_s": {"sim": t_sim, "refinement": t_pred},
+    }
+
+
 def tendon_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     """Run the experiment (module doc); writes ``tendon_box.csv``, ``tendon_box.png`` and
     ``tendon_box_xy.png`` into ``out`` and returns the summary.
@@ -335,121 +487,28 @@ def tendon_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, An
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     t_start = time.perf_counter()
     out = Path(out)
-    levels, t_torque, t_map = (3, 20.0, 10.0) if quick else (4, 90.0, 20.0)
-    directions = 8 if quick else 36
+    st = _Settings.of(quick)
     rows: list[list[Any]] = []
     summary: dict[str, Any] = {
         "scene": SCENE,
         "force_N": FORCE_N,
         "seat_N": list(SEAT_N),
         "torque_cap_Nm": TORQUE_CAP_NM,
-        "refinement": {"levels": levels, "time_limit_s": t_torque},
+        "refinement": {"levels": st.levels, "time_limit_s": st.t_torque},
         "cases": {},
         "torque_Nm": {},
     }
     drawn: dict[str, tuple[Any, Any, dict[str, Any]]] = {}
     for case, commands in CASES.items():
-        (model, data), grasp = settle_case(commands)
-        axes_err = float(np.abs(grasp.object_mat - np.eye(3)).max())
-        model_f = _model_preload_forces(grasp, commands, {"time_limit": t_torque, "levels": levels})
-        names = [model.body(b).name for b in grasp.hand_bodies]
-        mf = None if model_f is None else dict.fromkeys(LINKS, 0.0)
-        if mf is not None:
-            for name, f in zip(names, model_f[:, 0], strict=True):
-                mf[name] += float(f)
-        info = {
-            "commands_N": list(commands),
-            "links": names,
-            "normal_force_N": link_normal_forces(model, grasp),
-            "model_normal_force_N": mf,
-            "passive_tension_N": dict(zip(("proximal", "distal"),
-                                          passive_tensions(model, data).tolist(), strict=True)),
-            "joint_angles_rad": data.qpos[:4].round(5).tolist(),
-            "object_axes_vs_world_max_abs": axes_err,
-            "contacts": int(grasp.m),
-        }  # fmt: skip
-        summary["cases"][case] = info
-        drawn[case] = (model, data, {
-            "points_mm": (grasp.points_world()[:, :2] * 1000).tolist(),
-            "normals": grasp.frames_world()[:, 0, :2].tolist(),
-            "fn": grasp.forces[:, 0].tolist(),
-            "model_fn": None if model_f is None else model_f[:, 0].tolist(),
-            "passive_tension_N": passive_tensions(model, data).tolist(),
-            "commands": list(commands),
-        })  # fmt: skip
-        res: dict[str, dict[str, dict[str, Any]]] = {"sim": {}, "refinement": {}, "iterative": {}}
-        for sign, label in ((1.0, "+x"), (-1.0, "-x")):
-            res["sim"][label] = _simulate(commands, sign)
-            res["refinement"][label] = _predict(grasp, commands, sign, "refinement",
-                                                time_limit=t_torque, levels=levels)  # fmt: skip
-            res["iterative"][label] = _predict(grasp, commands, sign, "iterative",
-                                               time_limit=t_torque)  # fmt: skip
-            for method in res:
-                r = res[method][label]
-                rows.append([case, method, f"{label} torque", r["value"], "N m", int(r["capped"])])
-            r = res["sim"][label]
-            rows.append([case, "sim_onset", f"{label} torque", r["onset"], "N m", 0])
-        summary["torque_Nm"][case] = res
-    ratios = {}
-    for method, key in (("sim", "value"), ("sim_onset", "onset"), ("refinement", "value"),
-                        ("iterative", "value")):  # fmt: skip
-        src = "sim" if method == "sim_onset" else method
-        ratios[method] = {
-            s: _ratio(summary["torque_Nm"]["distal"][src][s][key],
-                      summary["torque_Nm"]["proximal"][src][s][key])
-            for s in ("+x", "-x")
-        }  # fmt: skip
-    summary["ratio_distal_over_proximal"] = ratios
-
-    fig, axs = plt.subplots(1, 3, figsize=(17, 5.6), gridspec_kw={"width_ratios": [1, 1, 0.9]})
-    for ax, case in zip(axs[:2], CASES, strict=True):
-        model, data, c = drawn[case]
-        tag = "proximal tendon active, distal passive" if case == "proximal" else (
-            "distal tendon active, proximal passive")  # fmt: skip
-        _draw_grasp(ax, model, data, c, f"{tag}: f_c = {list(CASES[case])} N\n"
-                    "preload contact normal forces (weight 0.98 N along +y)")  # fmt: skip
-    _draw_bars(axs[2], summary["torque_Nm"])
-    fig.suptitle("tendon_box (thesis grasp example 3): proximal vs distal tendon, "
-                 f"F = {FORCE_N:g} N, nonbackdrivable", fontsize=11)  # fmt: skip
-    fig.tight_layout()
-    fig.savefig(out / "tendon_box.png", dpi=110)
-    plt.close(fig)
-
-    # xy-plane map, distal tendon only (thesis fig. underactuated)
+        summary["cases"][case], drawn[case], grasp = _preload_case(commands, st)
+        summary["torque_Nm"][case] = _torque_case(case, grasp, commands, st, rows)
+    summary["ratio_distal_over_proximal"] = _ratios(summary["torque_Nm"])
+    _plot_cases(out / "tendon_box.png", drawn, summary["torque_Nm"])
     t_map0 = time.perf_counter()
-    commands = CASES["distal"]
-    kw = dict(preload=commands, nonbackdrivable=True, seat=SEAT_N, cap=FORCE_CAP_N,
-              workers=workers, progress=False)  # fmt: skip
-    t0 = time.perf_counter()
-    sim = simulated_map(SCENE, "xy", directions, **kw)
-    t_sim = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    pred = analysis_map(SCENE, "xy", directions, method="refinement", time_limit=t_map,
-                        levels=levels, **kw)  # fmt: skip
-    t_pred = time.perf_counter() - t0
-    agree = agreement(pred, sim)
-    for rm in (sim, pred):
-        for a, v, c in zip(rm.angles, rm.magnitudes, rm.capped, strict=True):
-            rows.append(["distal", rm.method, f"xy {np.degrees(a):.0f} deg", float(v), "N", int(c)])
-    _plot_xy(out / "tendon_box_xy.png", sim, pred,
-             f"tendon_box, distal tendon only (F = {FORCE_N:g} N): resistible force [N] in the "
-             f"xy-plane\n0 deg = +x (pushes the box into the right finger), 90 deg = +y "
-             f"(out of the hand)")  # fmt: skip
-    summary["xy_map"] = {
-        "directions": directions,
-        "cap_N": FORCE_CAP_N,
-        "angles_deg": np.degrees(sim.angles).round(2).tolist(),
-        "sim_N": sim.magnitudes.tolist(),
-        "sim_capped": sim.capped.tolist(),
-        "refinement_N": pred.magnitudes.tolist(),
-        "refinement_capped": pred.capped.tolist(),
-        "agreement": agree,
-        "wall_s": {"sim": t_sim, "refinement": t_pred},
-    }
+    summary["xy_map"] = _xy_map(out, st, workers, rows)
     summary["wall_s"] = {"torque_part": t_map0 - t_start, "total": time.perf_counter() - t_start}
     cols = ["case", "method", "direction", "value", "unit", "capped"]
     write_csv(out / "tendon_box.csv", [dict(zip(cols, r, strict=True)) for r in rows], cols)

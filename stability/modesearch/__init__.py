@@ -49,7 +49,8 @@ scale): forces and separations ``B``, transmission motions ``V``, excess actuato
 ``E`` (:func:`~stability.model.problem.scale_bounds`) and the motions ``r``, ``q``, ``d_t``
 (``motion_bound * 2 B``, as ``exact``). The bound holds for exact points inside it; an
 exact point beyond the bound, or one at the box, grows it tenfold and the query is solved
-again, at most :data:`BOX_RETRIES` times. An answer at the box has no proven bound
+again, at most :data:`~stability.options.BOX_RETRIES` times
+(:func:`~stability.options.enlarge_box`). An answer at the box has no proven bound
 (``upper``/``lower`` None, ``stats["box_reached"]``). The enlargements stop early when the
 larger box moved the exact value by no more than the bracket's tolerance (a grasp whose best
 value is approached only as a slide grows without limit, a mechanism: its value converges

@@ -17,7 +17,7 @@ import ihm
 import ihm.handmodel
 from ihm.contacts import HandModelError, HandModelWarning, HandOptions, grasp_from_mujoco
 from ihm.hands import linkage_gripper as lg
-from ihm.resistance import simulated_resistance
+from ihm.resistance import ResistanceOptions, simulated_resistance
 from ihm.scenes import SceneError, load_scene
 from stability import Existence, GraspError, MaxDisturbance, solve
 
@@ -177,7 +177,7 @@ def test_weight_alone_is_stable_and_answers_match_mujoco(settled):
         assert sol.status == "solved"
         assert max(sol.residuals().values()) < 1e-4 * (1 + sol.value)
         m2, d2 = load_scene(SCENE)
-        sim = simulated_resistance(m2, d2, u, cap=100, check_rate=False)
+        sim = simulated_resistance(m2, d2, u, options=ResistanceOptions(cap=100, check_rate=False))
         assert sol.value == pytest.approx(sim.value, rel=0.1), (axis, sol.value, sim.value)
 
 

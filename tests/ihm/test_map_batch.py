@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ihm.sim_maps import analysis_map, scene_map_rows
+from ihm.sim_maps import MapSpec, analysis_map, scene_map_rows
 from stability import solve
 from stability.batch import LocalExecutor, decode_row, run_batch, write_rows
 
 
 def test_scene_rows_through_the_batch_give_the_analysis_map(tmp_path: Path) -> None:
-    ref = analysis_map("barrett_box", "xz", 6, method="gws", progress=False)
-    rows = scene_map_rows("barrett_box", "xz", 6, method="gws")
+    spec = MapSpec("barrett_box", "xz", 6)
+    ref = analysis_map(spec, method="gws", progress=False)
+    rows = scene_map_rows(spec, method="gws")
     assert [r["id"] for r in rows] == [f"barrett_box-xz-{k}" for k in range(6)]
     q = tmp_path / "q.jsonl"
     write_rows(q, rows)
@@ -31,7 +32,7 @@ def test_scene_rows_through_the_batch_give_the_analysis_map(tmp_path: Path) -> N
     assert [bool(v["capped"]) for v in vals] == ref.capped.tolist()
     assert 0 < np.count_nonzero(mags) and np.all(mags <= 10.0)
     # the hand-model rows carry the commands and the weight as base load
-    hand = scene_map_rows("barrett_box", "xz", 2, method="refinement")
+    hand = scene_map_rows(MapSpec("barrett_box", "xz", 2), method="refinement")
     g, qq, method, _ = decode_row(1, hand[0])
     assert method == "refinement" and g.J is not None and qq.commands is not None
     base, d = np.asarray(qq.base), np.asarray(qq.direction)
@@ -44,11 +45,12 @@ def test_scene_rows_through_the_batch_give_the_analysis_map(tmp_path: Path) -> N
 def test_ihm_map_on_ray_equals_local(tmp_path: Path) -> None:
     import ray
 
+    spec = MapSpec("barrett_box", "xz", 4)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        on_ray = analysis_map("barrett_box", "xz", 4, method="gws", progress=False, ray="auto")
+        on_ray = analysis_map(spec, method="gws", progress=False, ray="auto")
     finally:
         ray.shutdown()
-    local = analysis_map("barrett_box", "xz", 4, method="gws", progress=False, workers=2)
+    local = analysis_map(spec, method="gws", progress=False, workers=2)
     np.testing.assert_array_equal(on_ray.magnitudes, local.magnitudes)
     np.testing.assert_array_equal(on_ray.capped, local.capped)

@@ -16,7 +16,7 @@ from conftest import THESIS_SCENES
 
 import ihm
 from ihm.contacts import SceneGrasp, grasp_from_mujoco, hand_coordinates
-from ihm.scenes import SceneError, load_scene, settle
+from ihm.scenes import SceneError, SettleOptions, load_scene, settle
 from stability import GraspError
 
 SCENES = ihm.available_scenes()
@@ -315,9 +315,9 @@ def test_bad_settle_arguments():
     model = mujoco.MjModel.from_xml_string(TOY.replace("OBJECT", BOX))
     data = mujoco.MjData(model)
     with pytest.raises(SceneError, match="rounds"):
-        settle(model, data, [4.0, -0.3], rounds=0)
+        settle(model, data, [4.0, -0.3], options=SettleOptions(rounds=0))
     with pytest.raises(SceneError, match="vtol"):
-        settle(model, data, [4.0, -0.3], vtol="x")
+        settle(model, data, [4.0, -0.3], options=SettleOptions(vtol="x"))
     with pytest.raises(SceneError, match="actuator forces must be 2 numbers"):
         settle(model, data, ["a", "b"])
     name = SCENES[0]

@@ -14,7 +14,7 @@ import pytest
 import ihm
 from ihm.contacts import grasp_from_mujoco
 from ihm.ratchet import Ratchet, RatchetError, actuated_joints
-from ihm.resistance import RateDependenceWarning, simulated_resistance
+from ihm.resistance import RateDependenceWarning, ResistanceOptions, simulated_resistance
 from stability import GraspError
 from stability.examples import PINCH_LEVER, PINCH_MAX_Z, PINCH_MU, PINCH_TORQUE
 
@@ -82,17 +82,18 @@ def test_pinch_resistance_is_the_analytic_one() -> None:
     check here: along -z slower ramps let go earlier (test_rate_warning_...)."""
     for sign in (1, -1):
         m, d = _pinch()
-        res = simulated_resistance(m, d, [0, 0, sign, 0, 0, 0], rate=0.5, cap=10,
-                                   check_rate=False)  # fmt: skip
+        opts = ResistanceOptions(rate=0.5, cap=10, check_rate=False)
+        res = simulated_resistance(m, d, [0, 0, sign, 0, 0, 0], options=opts)
         assert not res.capped and res.reason == "slip" and res.breakaway
         assert PINCH_MAX_Z * 0.995 <= res.value <= PINCH_MAX_Z * 1.005
         assert res.shift > 0.002 and res.creep_shift < 1e-4  # ended 2 mm on; crept 54 um
     m, d = _pinch()
-    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=10, check_rate=False)
+    opts = ResistanceOptions(cap=10, check_rate=False)
+    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], options=opts)
     assert res.value < 0.1 * PINCH_MAX_Z
     m, d = _pinch()
-    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=10, ratchet=Ratchet(m, d, [0, 1]),
-                               check_rate=False)  # fmt: skip
+    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], ratchet=Ratchet(m, d, [0, 1]),
+                               options=opts)  # fmt: skip
     assert res.capped and res.value == 10 and res.shift < 0.002 and res.reason == "cap"
     assert res.rate_check is None
 
@@ -107,8 +108,8 @@ def test_conditions_are_the_models_own() -> None:
     m.opt.solver = mujoco.mjtSolver.mjSOL_CG
     m.opt.noslip_iterations = 3
     before = copy.deepcopy(m.opt)
-    res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], rate=2, cap=0.5, max_shift=0.003,
-                               check_rate=False)  # fmt: skip
+    opts = ResistanceOptions(rate=2, cap=0.5, max_shift=0.003, check_rate=False)
+    res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=opts)
     c = res.conditions
     assert c["impratio"] == m.opt.impratio == 7.0
     assert (c["cone"], c["integrator"], c["solver"]) == ("pyramidal", "rk4", "cg")
@@ -119,7 +120,8 @@ def test_conditions_are_the_models_own() -> None:
     for name in ("impratio", "cone", "integrator", "solver", "noslip_iterations", "timestep"):
         assert getattr(m.opt, name) == getattr(before, name)
     m, d = _pinch()  # the scene's own: elliptic, impratio 100, implicitfast, Newton
-    c = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], cap=0.2, check_rate=False).conditions
+    opts = ResistanceOptions(cap=0.2, check_rate=False)
+    c = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=opts).conditions
     assert (c["cone"], c["impratio"], c["integrator"], c["solver"], c["noslip_iterations"]) == (
         "elliptic", 100.0, "implicitfast", "newton", 0)  # fmt: skip
 
@@ -134,8 +136,8 @@ def test_breakaway_is_reported_apart_from_creep() -> None:
     for imp in (100.0, 10.0):
         for rate in (1.0, 0.25):
             m, d = _pinch(impratio=imp)
-            res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], rate=rate, cap=10,
-                                       check_rate=False)  # fmt: skip
+            opts = ResistanceOptions(rate=rate, cap=10, check_rate=False)
+            res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=opts)
             assert res.reason == "slip" and res.breakaway and not res.capped, (imp, rate)
             assert PINCH_MAX_Z <= res.value <= PINCH_MAX_Z * 1.012, (imp, rate, res.value)
             assert 0 < res.creep_shift < 0.002 < res.shift
@@ -145,7 +147,8 @@ def test_breakaway_is_reported_apart_from_creep() -> None:
     assert 8 < creep[10.0, 1.0] / creep[100.0, 1.0] < 12
     assert 3.5 < creep[100.0, 0.25] / creep[100.0, 1.0] < 4.5
     m, d = _pinch(impratio=1.0)
-    res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], cap=10, check_rate=False)
+    opts = ResistanceOptions(cap=10, check_rate=False)
+    res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=opts)
     assert res.reason == "shift" and not res.breakaway
     assert res.creep_shift == res.shift > 0.002 and res.value < 0.9 * PINCH_MAX_Z
 
@@ -158,25 +161,28 @@ def test_rate_warning_fires_where_the_answer_depends_on_the_rate() -> None:
     0.125 N/s, also warned. At 1 N/s along +z the repeat agrees (2.225 N both): no warning."""
     m, d = _pinch()
     with pytest.warns(RateDependenceWarning, match=r"4\.5 at 100/s.*3\.12\d* at 25/s"):
-        res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], rate=100, cap=10)
+        res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0],
+                                   options=ResistanceOptions(rate=100, cap=10))  # fmt: skip
     rc = res.rate_check
     assert (rc["rate"], rc["slow_rate"]) == (100.0, 25.0) and rc["warned"]
     assert rc["value"] == res.value == pytest.approx(4.5) and rc["slow_value"] < 3.2
     assert rc["relative_difference"] > rc["rate_tol"] == 0.2
     m, d = _pinch()
     with pytest.warns(RateDependenceWarning, match="at 0.5/s.*at 0.125/s"):
-        res = simulated_resistance(m, d, [0, 0, -1, 0, 0, 0], rate=0.5, cap=10)
+        res = simulated_resistance(m, d, [0, 0, -1, 0, 0, 0],
+                                   options=ResistanceOptions(rate=0.5, cap=10))  # fmt: skip
     assert res.rate_check["slow_value"] < 0.7 * res.value
     m, d = _pinch()
     with warnings.catch_warnings():
         warnings.simplefilter("error", RateDependenceWarning)
-        res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], cap=10)
+        res = simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=ResistanceOptions(cap=10))
     assert res.rate_check["slow_rate"] == 0.25 and not res.rate_check["warned"]
     assert res.rate_check["slow_value"] == pytest.approx(res.value, rel=1e-3)
     # a tolerance of 0.01 % turns the same small difference into a warning
     m, d = _pinch()
     with pytest.warns(RateDependenceWarning, match="rate_tol 0%"):
-        simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], rate=0.5, cap=10, rate_tol=1e-4)
+        opts = ResistanceOptions(rate=0.5, cap=10, rate_tol=1e-4)
+        simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=opts)
 
 
 def test_rate_check_with_a_ratchet() -> None:
@@ -187,7 +193,8 @@ def test_rate_check_with_a_ratchet() -> None:
     for check in (False, True):
         m, d = _pinch()
         r = Ratchet(m, d, [0, 1])
-        res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=3, ratchet=r, check_rate=check)
+        opts = ResistanceOptions(cap=3, check_rate=check)
+        res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], ratchet=r, options=opts)
         assert res.capped and res.value == 3
         runs[check] = (d.time, d.qpos.copy(), r.stops.copy(), res)
     assert runs[True][0] == runs[False][0]
@@ -202,13 +209,15 @@ def test_rate_check_with_a_ratchet() -> None:
 
     m, d = _pinch()
     with pytest.raises(GraspError, match="check_rate=False"):
-        simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=1, ratchet=Stepper())
-    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=0.1, ratchet=Stepper(),
-                               check_rate=False)  # fmt: skip
+        simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], ratchet=Stepper(),
+                             options=ResistanceOptions(cap=1))  # fmt: skip
+    res = simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], ratchet=Stepper(),
+                               options=ResistanceOptions(cap=0.1, check_rate=False))  # fmt: skip
     assert res.rate_check is None
     m2, d2 = _pinch()
     with pytest.raises(GraspError, match="another model or data"):
-        simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], cap=1, ratchet=Ratchet(m2, d2, [0]))
+        simulated_resistance(m, d, [1, 0, 0, 0, 0, 0], ratchet=Ratchet(m2, d2, [0]),
+                             options=ResistanceOptions(cap=1))  # fmt: skip
 
 
 def test_bad_input() -> None:
@@ -220,7 +229,7 @@ def test_bad_input() -> None:
     with pytest.raises(GraspError, match="no body"):
         simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], body="nothing")
     with pytest.raises(GraspError, match="rate"):
-        simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], rate=-1)
+        simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=ResistanceOptions(rate=-1))
     for bad, msg in (({"cap": float("nan")}, "cap must be a finite number"),
                      ({"rate": float("inf")}, "rate must be a finite number"),
                      ({"max_turn": 0}, "max_turn must be > 0"),
@@ -228,7 +237,7 @@ def test_bad_input() -> None:
                      ({"slip_factor": 1}, "slip_factor must be > 1"),
                      ({"check_rate": "yes"}, "check_rate must be True or False")):  # fmt: skip
         with pytest.raises(GraspError, match=msg):
-            simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], **bad)
+            simulated_resistance(m, d, [0, 0, 1, 0, 0, 0], options=ResistanceOptions(**bad))
     with pytest.raises(RatchetError, match="unknown joint"):
         Ratchet(m, d, ["nothing"])
     with pytest.raises(RatchetError, match="not a hinge"):
@@ -268,7 +277,7 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from ihm.sim_maps import simulated_map
+    from ihm.sim_maps import MapSpec, simulated_map
 
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root), "MPLBACKEND": "Agg"}
@@ -285,8 +294,8 @@ def test_ihm_map_smoke_and_bad_names(tmp_path: Path) -> None:
     assert np.all(forces > 0) and np.all(forces <= 3)
     assert np.all(forces[1] >= forces[0])  # three times the grip holds at least as much
     assert (tmp_path / "barrett_box_xy.png").stat().st_size > 10_000
-    one = simulated_map("barrett_box", "xy", 4, preload=[0, 0.1, 0.1, 0.1], cap=3,
-                        workers=1, progress=False)  # fmt: skip
+    spec = MapSpec("barrett_box", "xy", 4, preload=[0, 0.1, 0.1, 0.1], cap=3)
+    one = simulated_map(spec, workers=1, progress=False)
     np.testing.assert_array_equal(one.magnitudes, forces[0])
     for bad, msg in (
         (["nope"], "unknown scene"),
@@ -310,15 +319,15 @@ def test_analysis_map_on_a_scene_grasp() -> None:
     """A stability method's map on the settled scene's grasp, the weight as base load: gws
     on barrett_box gives finite positive forces, symmetric in +-x and +-y like the box grasp;
     an unknown method is refused."""
-    from ihm.sim_maps import MapError, analysis_map
+    from ihm.sim_maps import MapError, MapSpec, analysis_map
 
-    rm = analysis_map("barrett_box", "xy", 4, method="gws", cap=20, progress=False)
+    rm = analysis_map(MapSpec("barrett_box", "xy", 4, cap=20), method="gws", progress=False)
     assert rm.method == "gws" and np.all(np.isfinite(rm.magnitudes))
     assert np.all(rm.magnitudes > 0) and not rm.capped.any()
     assert rm.magnitudes[0] == pytest.approx(rm.magnitudes[2], rel=1e-4)
     assert rm.magnitudes[1] == pytest.approx(rm.magnitudes[3], rel=1e-4)
     with pytest.raises(MapError, match="unknown method"):
-        analysis_map("barrett_box", "xy", 4, method="nope")
+        analysis_map(MapSpec("barrett_box", "xy", 4), method="nope")
 
 
 def test_map_agreement_measures() -> None:
@@ -381,7 +390,8 @@ def test_new_contact_ends_the_run():
     b = model.body("object").id
     u = data.xmat[b].reshape(3, 3) @ [0.0, 1.0, 0.0]  # object +y = palm -z
     assert u[2] == pytest.approx(-1.0, abs=1e-3)
-    res = simulated_resistance(model, data, np.r_[u, 0, 0, 0], cap=5, ratchet=scene.ratchet)
+    res = simulated_resistance(model, data, np.r_[u, 0, 0, 0], ratchet=scene.ratchet,
+                               options=ResistanceOptions(cap=5))  # fmt: skip
     assert res.reason == "new contact: palm" and not res.capped
     assert res.shift < 0.002 and 0 < res.value < 5
 
@@ -389,11 +399,12 @@ def test_new_contact_ends_the_run():
 def test_object_frame_maps_turn_with_the_object():
     """frame='object' maps the object's axes: on barrett_box (object x = palm y) the
     object-frame map at 0 deg is the world-frame yz map at 0 deg (force along palm +y)."""
-    from ihm.sim_maps import analysis_map
+    from ihm.sim_maps import MapSpec, analysis_map
 
-    kw = dict(method="gws", preload=[0, 0.1, 0.1, 0], cap=20, progress=False)
-    obj = analysis_map("barrett_box", "xy", 4, frame="object", **kw)
-    world = analysis_map("barrett_box", "yz", 4, **kw)
+    kw = dict(preload=[0, 0.1, 0.1, 0], cap=20)
+    obj = analysis_map(MapSpec("barrett_box", "xy", 4, frame="object", **kw), method="gws",
+                       progress=False)  # fmt: skip
+    world = analysis_map(MapSpec("barrett_box", "yz", 4, **kw), method="gws", progress=False)
     assert obj.magnitudes[0] == pytest.approx(world.magnitudes[0], rel=1e-3)  # object turned ~1e-4
     # (the object rests turned by ~1e-4 rad); object +y is palm -z: world yz at 270 deg
     assert obj.magnitudes[1] == pytest.approx(world.magnitudes[3], rel=1e-3)

@@ -308,16 +308,17 @@ def test_torque_resistance_same_for_both_preloads():
     preload case matters little. (The thesis' model on this grasp: refinement 0.0065 N m
     proximal-only and 0 distal-only, where its equilibrium has the proximal contacts
     open; see docs/experiments/tendon_box_summary.json.)"""
-    from ihm.resistance import simulated_resistance
+    from ihm.resistance import ResistanceOptions, simulated_resistance
 
     values = {}
     for commands in ((F, 0.0), (0.0, F)):
         for sign in (1.0, -1.0):
             scene, _ = tendon.settle_case(commands)
             ratchet = scene.ratchet
+            opts = ResistanceOptions(cap=tendon.TORQUE_CAP_NM, check_rate=False,
+                                     stop_rule="distance")  # fmt: skip
             r = simulated_resistance(scene.model, scene.data, [0, 0, 0, sign, 0, 0],
-                                     cap=tendon.TORQUE_CAP_NM, ratchet=ratchet,
-                                     check_rate=False, stop_rule="distance")  # fmt: skip
+                                     ratchet=ratchet, options=opts)  # fmt: skip
             assert not r.capped and r.turn > 0.05
             values[commands, sign] = r.value
     for commands in ((F, 0.0), (0.0, F)):
