@@ -61,7 +61,7 @@ Brackets and certificates (``certify=True``, default): every optimisation answer
 ``Solution.lower <= optimum <= Solution.upper``. The feasible side (MaxDisturbance
 ``lower``, OptimalCommands ``upper``) is the value of an exact point: the relaxed answer's
 contact modes (open, sticking, sliding) with the slide directions optimised by sequential
-LP (:func:`stability.model.coulomb.certify`); it satisfies every condition, the circular
+LP (:func:`stability.model.slides.certify`); it satisfies every condition, the circular
 cone and maximum dissipation included, and is the point returned. The other side is the
 last round's MIP dual bound (containment: it bounds every finer level). A first exact
 point has every contact sticking and every actuator locked (one LP). ``Existence``

@@ -10,14 +10,18 @@
 * :mod:`~stability.model.run`: the methods' options (:class:`MipOptions`), one checked MIP
   solve within the deadline (:func:`run`) and the Solution they return;
 * :mod:`~stability.model.coulomb`: Coulomb friction with maximum dissipation stated
-  exactly (:class:`CoulombModel`: circular cone, bilinear dissipation, for SCIP), and the
-  LP that certifies an answer as an exact solution (:func:`certify`).
+  exactly (:class:`CoulombModel`: circular cone, bilinear dissipation, for SCIP), polished
+  to an exact point by one LP per contact-mode set;
+* :mod:`~stability.model.slides`: the search over slide directions that turns a relaxed
+  or SCIP point into an exact one (:func:`~stability.model.slides.slide_search`) and the
+  certificate of a relaxation's answer (:func:`certify`).
 """
 
-from .coulomb import CoulombModel, certify, exact_conditions
+from .coulomb import CoulombModel, exact_conditions
 from .problem import ExactBounds, ExactPoint, ExactProblem, hand_data, length_scale, scale_bounds
 from .query import QueryData, add_query, query_value
 from .run import CONDITIONS, MipOptions, Stop, run
+from .slides import certify
 
 __all__ = [
     "CONDITIONS",

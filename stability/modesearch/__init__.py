@@ -28,7 +28,7 @@ the largest misalignment of friction against the slide (or friction outside the 
 and splits an arc between the friction's and the slide's angles; nodes are taken
 best-first, deeper first on ties.
 
-Exact points come from polishing only (:func:`stability.model.coulomb.slide_search`, the
+Exact points come from polishing only (:func:`stability.model.slides.slide_search`, the
 certificate of ``refinement``): a node's modes and slide directions are fixed and the slide
 angles optimised by sequential LP; the point must pass the exact conditions. A leaf whose LP
 point satisfies every complementarity (within ``1e-7 (1 + B)``) is polished; so is a dive

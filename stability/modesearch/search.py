@@ -15,9 +15,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._lp import quiet_highs
-from ..model.coulomb import CERTIFY_TRIES, slide_search
 from ..model.problem import length_scale
 from ..model.query import QueryData
+from ..model.slides import CERTIFY_TRIES, slide_search
 from ..solution import slide_alignment
 from .node import HINF, OPTIMAL, TWO_PI, Node, NodeLP, NodeResult
 
