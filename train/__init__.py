@@ -7,9 +7,11 @@ the islands-and-bridges toy), ``python -m train.islands`` (the islands benchmark
 fidelity, transfer and grasp shield benchmarks), ``python -m train.shield_study`` (training
 with and without each shield: does a shield help the hand learn?).
 
-Modules: :mod:`~train.sb3` (SB3 plumbing the trainers share), :mod:`~train.rotation` and
-:mod:`~train.islands_ppo` (the trainers), :mod:`~train.evaluation` (the one evaluation
-loop), :mod:`~train.policy` (loading and evaluating shipped policies),
+Modules: :mod:`~train.trainer` (the one PPO trainer: config, run directory, seeds, envs,
+model, callbacks, evaluation), :mod:`~train.rotation` and :mod:`~train.islands_ppo` (the two
+tasks it runs), :mod:`~train.options` (configs as command lines and config.json),
+:mod:`~train.sb3` (SB3 plumbing the tasks share), :mod:`~train.evaluation` (the one
+evaluation loop), :mod:`~train.policy` (loading and evaluating shipped policies),
 :mod:`~train.seeding`, :mod:`~train.stats`, :mod:`~train.vec` and :mod:`~train.pipeline`
 (seeds, intervals, worker processes, pipelined rollouts).
 """

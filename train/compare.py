@@ -26,13 +26,15 @@ import numpy as np
 
 from stability.cli import ArgumentParser
 from stability.io import write_csv
+from train.options import saved_value
 from train.rotation import monitor_returns
 
 __all__ = ["load_run", "main", "summarise"]
 
 
 def load_run(run_dir: Path, group_by: str = "shield") -> dict:
-    """One run: its group (``config.json[group_by]``), seed, training returns (steps,
+    """One run: its group (``group_by`` in its config.json, a top-level key or a field of a
+    group of settings: :func:`train.options.saved_value`), seed, training returns (steps,
     return) and evaluation rows."""
     cfg_file = run_dir / "config.json"
     if not cfg_file.is_file():
@@ -46,7 +48,7 @@ def load_run(run_dir: Path, group_by: str = "shield") -> dict:
             evals = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
     return {
         "dir": run_dir,
-        "group": str(cfg.get(group_by) if cfg.get(group_by) is not None else "none"),
+        "group": str(group if (group := saved_value(cfg, group_by)) is not None else "none"),
         "seed": int(cfg.get("seed", -1)),
         "steps": steps,
         "ret": ret,

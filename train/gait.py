@@ -79,12 +79,12 @@ def render_strip(
     import matplotlib.pyplot as plt
     import mujoco
 
-    from envs.four_finger import FourFingerRotate
+    from envs.four_finger import FourFingerRotate, RenderSettings
 
     frames = {}
     for cam in ("side", "top"):
-        env = FourFingerRotate(**env_kwargs, render_mode="rgb_array", width=320, height=320,
-                               camera=cam)  # fmt: skip
+        view = RenderSettings(width=320, height=320, camera=cam)
+        env = FourFingerRotate(**env_kwargs, render_mode="rgb_array", render=view)
         env.reset(options={"grasp": 0})
         imgs = []
         for q, c in zip(states, ctrls, strict=True):

@@ -6,10 +6,11 @@ wrapper stack, the seeds set in one block, runs named ``{env}__{shield}__{seed}_
 under ``--out``. (``python -m train.ppo`` without ``islands`` trains the four-finger
 rotation main job, :mod:`train.rotation`.)
 
-A run directory holds::
+The run is :data:`TASK` plugged into the one trainer :func:`train.trainer.train`. A run
+directory holds::
 
     model.zip           the PPO model (policy, value net, optimiser, num_timesteps)
-    config.json         the Config of the run
+    config.json         the Config of the run, led by "task": "islands"
     monitor/N.monitor.csv  one Monitor log per training env (r, l, t, is_success)
     eval.json           the final evaluation (:func:`train.evaluation.evaluate_success`)
     progress.csv        SB3's logger (losses/, charts/, shield/ keys)
@@ -34,7 +35,6 @@ Examples::
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -43,33 +43,24 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/IslandsBridges-v0 and ihm/IslandsBridgesRing-v0)
 from train.evaluation import evaluate_success
-from train.sb3 import (
-    build_parser,
-    learning_rate,
-    new_ppo,
-    normalizer,
-    open_run,
-    opt,
-    option_problems,
-    progress_bar,
-    saved_timesteps,
-    seed_everything,
-)
+from train.options import build_parser, opt
+from train.sb3 import learning_rate, new_ppo, normalizer, option_problems, progress_bar
 from train.seeding import EnvSeeds, RunSeeds
+from train.trainer import Run, Task, train
 
 __all__ = [
     "REWARDS",
     "SHIELDS",
+    "TASK",
     "Config",
+    "IslandsTask",
     "TrainStats",
     "build_envs",
     "build_model",
@@ -309,62 +300,69 @@ class TrainStats(BaseCallback):
         self.logger.record("shield/intervention_rate", self.interventions / max(self.steps, 1))
 
 
+class IslandsTask(Task):
+    """PPO on the islands-and-bridges toy as a :class:`train.trainer.Task` (module doc)."""
+
+    name = "islands"
+
+    def parse(self, argv: Sequence[str]) -> Config:
+        return parse_config(argv)
+
+    def run_name(self, cfg: Config) -> str:
+        return run_name(cfg)
+
+    def resume_options(self, cfg: Config, argv: Sequence[str]) -> tuple[str, ...]:
+        return ("total_steps", "eval_episodes", "progress", "verbose")
+
+    def threads(self, cfg: Config) -> int:
+        return 1  # small MLPs: threads cost more than they give on 2 cores
+
+    def train_env(self, cfg: Config, seeds: RunSeeds, run_dir: Path) -> VecEnv:
+        stats = run_dir / "vecnormalize.pkl" if cfg.resume is not None else None
+        return build_envs(cfg, seeds, run_dir / "monitor", stats)  # "train" streams
+
+    def eval_envs(self, cfg: Config, seeds: RunSeeds) -> list[gym.Env]:
+        n_eval = min(cfg.n_envs, max(cfg.eval_episodes, 1))
+        return make_eval_envs(cfg, seeds, "validation", n_eval)
+
+    def new_model(self, cfg: Config, vec: VecEnv) -> PPO:
+        return build_model(cfg, vec)
+
+    def callbacks(self, cfg: Config, run_dir: Path, evals: Any) -> list[BaseCallback]:
+        return [TrainStats()]
+
+    def evaluate(self, run: Run, train_seconds: float) -> dict[str, Any]:
+        """The success rate of the deterministic, shielded policy on the validation envs
+        (:func:`train.evaluation.evaluate_success`) with the run's size and settings."""
+        cfg = run.cfg
+        t0 = time.perf_counter()
+        norm = normalizer(run.vec)
+        result = evaluate_success(run.model, run.evals, cfg.eval_episodes, normalize=norm)
+        result.update(
+            num_timesteps=int(run.model.num_timesteps),
+            train_seconds=round(train_seconds, 2),
+            eval_seconds=round(time.perf_counter() - t0, 2),
+            deterministic=True,
+            stream="validation",
+            shield=cfg.shield,
+            reward=cfg.reward,
+        )
+        return result
+
+    def summary(self, run: Run, result: dict[str, Any], train_seconds: float) -> str:
+        return (
+            f"{run.dir}: {result['num_timesteps']} steps, success rate "
+            f"{result['success_rate']:.3f} over {result['episodes']} episodes "
+            f"(deterministic, shield {run.cfg.shield}), failure rate "
+            f"{result['failure_rate']:.3f}, shield intervention rate "
+            f"{result['intervention_rate']:.3f}; train {train_seconds:.1f} s"
+        )
+
+
+TASK = IslandsTask()
+
+
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    """``python -m train.ppo islands``: train (or resume), evaluate, save; returns the
-    evaluation dict."""
-    cfg = parse_config(argv)
-    torch.set_num_threads(1)  # small MLPs: threads cost more than they give on 2 cores
-
-    cfg, run_dir = open_run(
-        cfg, run_name(cfg), keep=("total_steps", "eval_episodes", "progress", "verbose")
-    )
-
-    # ---- seeds, all in one place (train.seeding) ---------------------------------------------
-    done_steps = saved_timesteps(run_dir) if cfg.resume is not None else 0
-    # a resumed run is a new segment of the seed tree: fresh episodes, no repeated streams
-    seeds = RunSeeds(cfg.seed, segment=done_steps)
-    seed_everything(seeds.global_seed)  # random, numpy, torch (initial weights, sampling)
-    stats = run_dir / "vecnormalize.pkl" if cfg.resume is not None else None
-    train_env = build_envs(cfg, seeds, run_dir / "monitor", stats)  # "train" streams
-    n_eval = min(cfg.n_envs, max(cfg.eval_episodes, 1))
-    eval_envs = make_eval_envs(cfg, seeds, "validation", n_eval)
-    # -----------------------------------------------------------------------------------------
-
-    if cfg.resume is not None:
-        # seed=None: SB3 would otherwise re-seed the envs with consecutive seeds
-        model = PPO.load(run_dir / "model.zip", env=train_env, device="cpu", seed=None)
-    else:
-        model = build_model(cfg, train_env)
-    model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
-
-    callbacks = train_callbacks(cfg, desc=run_dir.name)
-    t0 = time.perf_counter()
-    model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
-    train_s = time.perf_counter() - t0
-    model.save(run_dir / "model.zip")
-    if isinstance(train_env, VecNormalize):
-        train_env.save(str(run_dir / "vecnormalize.pkl"))
-
-    t0 = time.perf_counter()
-    result = evaluate_success(model, eval_envs, cfg.eval_episodes, normalize=normalizer(train_env))
-    result.update(
-        num_timesteps=int(model.num_timesteps),
-        train_seconds=round(train_s, 2),
-        eval_seconds=round(time.perf_counter() - t0, 2),
-        deterministic=True,
-        stream="validation",
-        shield=cfg.shield,
-        reward=cfg.reward,
-    )
-    (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    train_env.close()
-    for env in eval_envs:
-        env.close()
-    print(
-        f"{run_dir}: {result['num_timesteps']} steps, success rate "
-        f"{result['success_rate']:.3f} over {result['episodes']} episodes "
-        f"(deterministic, shield {cfg.shield}), failure rate {result['failure_rate']:.3f}, "
-        f"shield intervention rate {result['intervention_rate']:.3f}; "
-        f"train {train_s:.1f} s"
-    )
-    return {**result, "run_dir": str(run_dir)}
+    """``python -m train.ppo islands``: train (or resume), evaluate, save
+    (:func:`train.trainer.train` with :data:`TASK`); returns the evaluation dict."""
+    return train(TASK, argv)

@@ -2,10 +2,10 @@
 
 :func:`load_policy` turns a run directory (``policy.pt`` or ``model.zip``, with
 ``vecnormalize.pkl`` and ``config.json``) into a deterministic ``obs -> action`` function
-and the env options it was trained with; :data:`SHIPPED` is the shipped four-finger policy
-(``policies/four_finger_sphere``), :data:`STATED_RANGES` the randomised physics each shipped
-robust policy is stated for. :func:`evaluate` runs such a function on
-``FourFingerRotate`` from start grasps drawn with given seeds (the evaluation loop of
+and the env it was trained in (:func:`policy_env`: its groups of settings); :data:`SHIPPED`
+is the shipped four-finger policy (``policies/four_finger_sphere``), :data:`STATED_RANGES`
+the randomised physics each shipped robust policy is stated for. :func:`evaluate` runs such
+a function on ``FourFingerRotate`` from start grasps drawn with given seeds (the evaluation loop of
 :mod:`train.evaluation`). Used by ``python -m train.gait``, ``python -m train.rollout`` and
 the policy-based benchmarks (:mod:`train.bench`).
 """
@@ -16,15 +16,25 @@ import json
 import pickle
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from envs.four_finger import TIMESTEP, FourFingerRotate, GraspCache
+from envs.four_finger import FourFingerRotate, GraspCache, StartSettings
 from train.evaluation import RotationEpisode, one_by_one, run_episodes
-from train.rotation import env_physics, policy_dir
+from train.options import from_saved
+from train.rotation import RotateConfig, policy_dir
 from train.runfiles import check_policy_dir, load_actor_critic
 
-__all__ = ["ROOT", "SHIPPED", "STATED_RANGES", "evaluate", "load_policy", "policy_dir"]
+__all__ = [
+    "ROOT",
+    "SHIPPED",
+    "STATED_RANGES",
+    "evaluate",
+    "load_policy",
+    "policy_dir",
+    "policy_env",
+]
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "four_finger_sphere"
@@ -42,20 +52,22 @@ STATED_RANGES: dict[str, float] = {
 }
 
 
-def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict]:
-    """A deterministic ``obs -> action`` function and the run's env options.
+def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict[str, Any]]:
+    """A deterministic ``obs -> action`` function and the keyword arguments of
+    ``FourFingerRotate`` that the policy runs in (:func:`policy_env`).
 
     ``run_dir`` holds ``policy.pt`` (SB3 ``ActorCriticPolicy.save``) or ``model.zip``, plus
-    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json``; a training run
-    that kept a best validated checkpoint is read from its ``best/``
-    (:func:`train.rotation.policy_dir`), the policy its evaluations and export name.
-    :class:`~train.runfiles.PolicyError` names what a directory lacks.
+    ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json`` (either layout:
+    :func:`train.options.from_saved`); a training run that kept a best validated checkpoint
+    is read from its ``best/`` (:func:`train.rotation.policy_dir`), the policy its
+    evaluations and export name. :class:`~train.runfiles.PolicyError` names what a directory
+    lacks.
     """
     run_dir = check_policy_dir(Path(run_dir))
     policy = load_actor_critic(run_dir)
     with (run_dir / "vecnormalize.pkl").open("rb") as f:
         norm = pickle.load(f)
-    cfg = json.loads((run_dir / "config.json").read_text())
+    cfg = from_saved(RotateConfig, json.loads((run_dir / "config.json").read_text()))
     mean, var = norm.obs_rms.mean, norm.obs_rms.var
     clip, eps = norm.clip_obs, norm.epsilon
 
@@ -64,10 +76,21 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
         a, _ = policy.predict(x, deterministic=True)
         return a
 
-    keys = {"object": "sphere", "gravity": True, "torsional": True, "history": 1, "grip": "nominal"}
-    kwargs = {k: cfg.get(k, v) for k, v in keys.items()}
-    kwargs["privileged"] = bool(cfg.get("privileged_critic", False))
-    return act, {**kwargs, **env_physics(cfg.get("timestep", TIMESTEP))}
+    return act, policy_env(cfg)
+
+
+def policy_env(cfg: RotateConfig) -> dict[str, Any]:
+    """The env a policy trained with ``cfg`` runs in, as ``FourFingerRotate`` keyword
+    arguments: the run's ``object`` and its groups ``sim`` and ``observation`` as they are,
+    the start grasps of its grip (uniform over the cache: no failure replay, no turned
+    starts), nominal physics and the env's own reward (the thesis' rotation rate; what the
+    evaluations measure does not depend on it)."""
+    return {
+        "object": cfg.object,
+        "sim": cfg.sim,
+        "starts": StartSettings(grip=cfg.starts.grip),
+        "observation": cfg.observation,
+    }
 
 
 def evaluate(

@@ -7,43 +7,50 @@
 - ``python -m train.ppo islands [options]``: PPO on a shielded islands-and-bridges env
   (:mod:`train.islands_ppo`; ``python -m train.ppo islands --help``).
 
-``--resume RUN_DIR`` picks the trainer from the run's config.json. This module only
-dispatches; the SB3 plumbing both trainers share is :mod:`train.sb3`, their evaluation
-loop :mod:`train.evaluation`.
+Both tasks run in the one trainer :func:`train.trainer.train` (:data:`TASKS`). ``--resume
+RUN_DIR`` picks the task that the run's config.json records
+(:func:`train.trainer.run_task`). This module only dispatches; the SB3 plumbing the tasks
+share is :mod:`train.sb3`, their evaluation loop :mod:`train.evaluation`.
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from train import islands_ppo, rotation
+from train.trainer import Task, run_task, train
 
-__all__ = ["main"]
+__all__ = ["TASKS", "main"]
+
+TASKS: dict[str, Task] = {t.name: t for t in (rotation.TASK, islands_ppo.TASK)}
+"""The tasks by the name their runs' config.json records."""
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    """``python -m train.ppo``: the four-finger rotation main job (:func:`train.rotation.main`)
+    """``python -m train.ppo``: the four-finger rotation main job (:data:`train.rotation.TASK`)
     by default; ``islands`` as the first argument trains on the islands-and-bridges toy
-    (:func:`train.islands_ppo.main`). ``--resume RUN_DIR`` picks the trainer from the run's
-    config.json. Returns the trainer's final evaluation."""
+    (:data:`train.islands_ppo.TASK`), ``seeds`` runs the main job for several seeds.
+    ``--resume RUN_DIR`` picks the task from the run's config.json. Returns the trainer's
+    final evaluation."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "islands":
-        return islands_ppo.main(argv[1:])
+        return train(islands_ppo.TASK, argv[1:])
     if argv and argv[0] == "seeds":
         from train import seeds
 
         return {"seeds": seeds.main(argv[1:])}
     if "--resume" in argv:
         i = argv.index("--resume")
-        cfg_file = Path(argv[i + 1]) / "config.json" if i + 1 < len(argv) else None
-        if cfg_file is not None and cfg_file.is_file():
-            if "object" not in json.loads(cfg_file.read_text()):  # rotation runs name one
-                return islands_ppo.main(argv)
-    return rotation.main(argv)
+        run_dir = Path(argv[i + 1]) if i + 1 < len(argv) else None
+        if run_dir is not None and (run_dir / "config.json").is_file():
+            name = run_task(run_dir)
+            if name not in TASKS:
+                raise SystemExit(f"python -m train.ppo: error: --resume {run_dir}: task {name!r}")
+            return train(TASKS[name], argv)
+    return train(rotation.TASK, argv)
 
 
 if __name__ == "__main__":

@@ -224,10 +224,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
         policy_dir = Path(cfg.policy) if cfg.policy else SHIPPED
         act, env_opts = load_policy(policy_dir)
         agent = policy_dir.resolve().name
-    # the env options as RotateConfig fields (its timestep gives frame_skip back)
-    known = RotateConfig.__dataclass_fields__
-    env_cfg = RotateConfig(**{k: v for k, v in env_opts.items() if k in known})
-    env_cfg = replace(env_cfg, privileged_critic=bool(env_opts.get("privileged", False)))
+    # the policy's env (its object and groups of settings) as a RotateConfig
+    env_cfg = RotateConfig(**env_opts)
     settings = ["none", "qp"] if cfg.shield == "both" else [cfg.shield]
     # train.rotation.make_env wraps the env in shields.GraspShield for shield "qp"
     envs: dict[str, gym.Env] = {

@@ -6,9 +6,11 @@ reward = the sphere's angular velocity about the vertical axis, 64-step
 episodes from a cache of varied stable grasps, separate policy and value nets
 of 4 x 512, one update per 96 episodes of 64 steps (6,144 env steps).
 
-A run directory holds::
+The run is :data:`TASK` plugged into the one trainer :func:`train.trainer.train`; its
+config, command line and checks are :mod:`train.rotation_config` (:class:`RotateConfig`,
+:func:`parse_config`). A run directory holds::
 
-    config.json           the RotateConfig of the run
+    config.json           the RotateConfig of the run (below)
     model.zip             the latest PPO model (also every --checkpoint-every steps)
     vecnormalize.pkl      the observation/reward normalisation statistics
     monitor/N.monitor.csv one Monitor log per training env (return r, length l, time t)
@@ -22,6 +24,20 @@ the mean rotation speed (turned angle about +z over the episode's duration,
 rad/s; a drop ends an episode and counts its time so far) and the drop rate
 (:func:`train.evaluation.evaluate_rotation`).
 ``--resume RUN_DIR`` continues a run for ``--total-steps`` more steps.
+
+config.json records ``"task": "rotation"`` and the config's fields, the env's settings as
+their groups (:mod:`envs.four_finger.settings`), each passed to the env as it is::
+
+    {"task": "rotation", "object": "sphere", "thesis": false,
+     "sim": {"gravity": true, "torsional": true, "timestep": 0.002, "frame_skip": 25, ...},
+     "shield": "none", ..., "log_std_init": -0.5,
+     "reward": {"rotation_cap": 1.0, "drop_weight": 0.0, "height_weight": 1.0, ...},
+     "randomization": {"randomize": false, "corner_prob": 0.0, ..., "range_scale": 1.0},
+     "starts": {"grasps": "train", "n_grasps": 256, "grip": "nominal", ...},
+     "validate_corners": 0, ..., "observation": {"history": 1, "privileged": false}, ...}
+
+A config.json from before the groups names every option at the top level
+(``"drop_weight": 0.0``); it is read as well (:func:`train.options.from_saved`).
 """
 
 from __future__ import annotations
@@ -37,36 +53,35 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
-import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import (
-    FRAME_SKIP,
-    GRIPS,
-    HEIGHT_FROM,
+    GRASP_SETS,
     N_OBS,
     N_PRIVILEGED,
-    OBJECTS,
-    TIMESTEP,
-    FourFingerError,
     PhysicsSample,
     Randomization,
-    check_start_sampling,
     corners,
     grasp_cache,
 )
-from shields import SHIELDS, make_shield
-from shields.qp import BACKENDS
+from shields import make_shield
 from stability.io import write_csv
 from train.curves import monitor_returns, plot_curve, steps_label
 from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
+from train.rotation_config import (
+    POLICY_DT,
+    THESIS,
+    RotateConfig,
+    TrainingRandomization,
+    config_problems,
+    env_physics,
+    parse_config,
+)
 from train.runfiles import (
     FINETUNE,
     checkpoint,
@@ -80,28 +95,28 @@ from train.runfiles import (
 )
 from train.sb3 import (
     RolloutThreads,
-    build_parser,
     learning_rate,
     new_ppo,
     normalizer,
-    open_run,
-    opt,
-    option_problems,
-    progress_bar,
-    saved_timesteps,
-    seed_everything,
 )
 from train.seeding import EnvSeeds, RunSeeds
+from train.trainer import Run, Task, train
 from train.vec import make_vec_env
 
 __all__ = [
     "ENV_ID",
     "POLICY_DT",
     "TARGET_SPEED",
+    "TASK",
+    "THESIS",
     "EvalCallback",
     "RotateConfig",
+    "RotationEvals",
+    "RotationTask",
+    "TrainingRandomization",
     "build_model",
     "checkpoint",
+    "config_problems",
     "env_physics",
     "evaluate_rotation",
     "export_policy",
@@ -117,255 +132,9 @@ __all__ = [
 ]
 
 ENV_ID = "ihm/FourFingerRotate-v0"
-POLICY_DT = TIMESTEP * FRAME_SKIP  # [s] 0.05: the thesis' 20 Hz policy
 TARGET_SPEED = 0.5  # [rad/s] the task's target, over 20 s episodes; drops <= 5 %
 MAX_DROP_RATE = 0.05  # the task's drop target
 SHIELD_KEYS = ("shield_episode_interventions", "shield_episode_seconds")  # monitor.csv columns
-
-
-THESIS: dict[str, Any] = {
-    "pi": [512, 512, 512, 512],
-    "vf": [512, 512, 512, 512],
-    "learning_rate": 1e-4,
-    "episode_steps": 64,
-    "rotation_cap": float("inf"),
-    "height_weight": 0.0,
-    "drop_weight": 0.0,
-    "randomize": False,
-    "lr_schedule": "constant",
-}
-"""What ``--thesis`` changes back to the thesis' setup (ch. 7): 64-step episodes, the uncapped
-rotation reward without a drop penalty, nominal physics, a constant learning rate. Options
-given beside ``--thesis`` still apply."""
-
-
-@dataclass
-class RotateConfig:
-    """Everything a rotation training run depends on; saved as config.json."""
-
-    object: str = opt("sphere", "object in the hand", choices=OBJECTS)
-    thesis: bool = opt(
-        False, "the thesis' setup as the defaults (train.rotation.THESIS); other options apply"
-    )
-    gravity: bool = opt(True, "gravity on (the thesis' hard case)")
-    torsional: bool = opt(
-        True, "torsional friction at the contacts (condim 4; off: point contacts, exploitable)"
-    )
-    timestep: float = opt(
-        TIMESTEP,
-        "physics timestep [s]; the policy period stays 0.05 s (0.05 / timestep substeps). "
-        "0.0025: about 20 %% faster, coarser (docs/bench/four_finger_env.md)",
-    )
-    shield: str = opt(
-        "none",
-        "shield around every env, kept for evaluation (shields.make_shield): "
-        + "; ".join(f"{k}: {v}" for k, v in SHIELDS.items()),
-        choices=tuple(SHIELDS),
-    )
-    shield_backend: str = opt("daqp", "QP backend of --shield qp and qp-drift", choices=BACKENDS)
-    total_steps: int = opt(1_200_000, "env steps to train (with --resume: steps to add)")
-    seed: int = opt(1, "run seed (>= 0): root of the env, policy and evaluation streams")
-    n_envs: int = opt(16, "parallel training envs")
-    workers: int = opt(
-        2, "processes that step the training envs, each its share (train.vec); 0: in this one"
-    )
-    pipeline: bool = opt(
-        True,
-        "with workers: overlap the policy's forward passes with the physics "
-        "(train.pipeline; the same transitions)",
-    )
-    pi: list[int] = opt([256, 256, 256], "hidden layers of the policy net (thesis: 4 x 512)")
-    vf: list[int] = opt(
-        [256, 256, 256], "hidden layers of the separate value net (thesis: 4 x 512)"
-    )
-    learning_rate: float = opt(2e-4, "Adam learning rate (thesis: 1e-4)")
-    n_steps: int = opt(384, "rollout length per env (16 x 384 = 96 episodes of 64 steps)")
-    batch_size: int = opt(1024, "minibatch size")
-    n_epochs: int = opt(5, "PPO epochs per rollout")
-    gamma: float = opt(0.99, "discount factor")
-    gae_lambda: float = opt(0.95, "GAE lambda")
-    clip_range: float = opt(0.2, "PPO clipping range")
-    ent_coef: float = opt(0.0, "entropy bonus coefficient")
-    log_std_init: float = opt(-0.5, "initial log std of the Gaussian policy")
-    drop_weight: float = opt(0.0, "env drop penalty weight (0: the thesis' reward)")
-    height_weight: float = opt(
-        1.0, "weight of the env's height term (penalises the object sagging below 0.07 m)"
-    )
-    height_from: str = opt(
-        "hold",
-        "the height term's reference: hold (0.07 m, about 7 mm below a held object) or start "
-        "(the object's start height: every mm of sag counts)",
-        choices=HEIGHT_FROM,
-    )
-    slip_weight: float = opt(
-        0.0, "weight of the contact-slip penalty (mean sliding speed of the contacts [m/s])"
-    )
-    tilt_weight: float = opt(
-        0.0, "weight of the tilt penalty (the object's tilt since the episode's start [rad])"
-    )
-    rotation_cap: float = opt(
-        1.0, "cap of the rotation reward [rad/s] (inf: the thesis' uncapped reward)"
-    )
-    randomize: bool = opt(
-        False,
-        "randomised physics in the training envs (envs.four_finger.Randomization: friction, "
-        "torsional friction, mass, servo gains, latency, sensor noise); evaluations stay nominal",
-    )
-    grip: str = opt(
-        "nominal",
-        "start grasps' squeeze: nominal (the thesis' inward grip) or firm (also lifting the "
-        "object and 1 N harder, verified to hold still at the worst --randomize corner)",
-        choices=GRIPS,
-    )
-    corner_prob: float = opt(
-        0.0,
-        "with --randomize: probability that a training episode's physics is one of the 16 "
-        "corners of the ranges (envs.four_finger.corners) instead of a uniform draw",
-    )
-    hard_prob: float = opt(
-        0.0,
-        "with --randomize: probability that a training episode is drawn from the hard region "
-        "(friction x0.5, mass x1-2; envs.four_finger.Randomization.hard_prob)",
-    )
-    hard_gain: float = opt(
-        Randomization().gain[1],
-        "with --hard-prob: upper bound of the servo gain scales in the hard region (1.2: the "
-        "whole range x0.8-1.2; 1.0: the weak half)",
-    )
-    latency_prob: float = opt(
-        Randomization().latency_prob,
-        "with --randomize: probability that an episode has one step of action latency (the "
-        "corners always have it)",
-    )
-    replay_prob: float = opt(
-        0.0,
-        "probability that a training episode restarts a start (grasp and physics) that "
-        "dropped the object before in the same env (failure replay; envs.four_finger)",
-    )
-    turned_prob: float = opt(
-        0.0,
-        "cube: probability that a training episode starts from a grasp with the cube turned "
-        ">= 22.5 degrees from the hand's square (envs.four_finger.cube_turn)",
-    )
-    range_scale: float = opt(
-        1.0,
-        "with --randomize: shrink the friction, torsional, mass and gain ranges towards nominal "
-        "by this factor in (0, 1] (Randomization.scaled; 0.5: friction x0.75-1.25, mass "
-        "x0.71-1.41); latency and noise stay. A first curriculum stage; the corners validated "
-        "are the scaled range's",
-    )
-    validate_corners: int = opt(
-        0,
-        "with --randomize: also validate at each of the 16 corners, N episodes each; best/ is "
-        "then chosen on the worse of the nominal and the pooled corner figures",
-    )
-    lr_schedule: str = opt(
-        "linear",
-        "learning rate: constant, or linear decay to 0 over --total-steps",
-        choices=("constant", "linear"),
-    )
-    episode_steps: int = opt(64, "training episode length (thesis: 64)")
-    checkpoint_every: int = opt(100_000, "env steps between checkpoints and evaluations")
-    keep_best: bool = opt(
-        True,
-        "keep the best validated checkpoint in best/ (drops <= 5 %% first, then speed); the "
-        "shipped and held-out evaluations use it",
-    )
-    eval_episodes: int = opt(20, "episodes per evaluation (deterministic policy)")
-    eval_seconds: float = opt(20.0, "length of an evaluation episode [s]")
-    threads: int = opt(2, "torch threads for the PPO update")
-    out: str = opt("runs", "directory that receives the run directory")
-    resume: str | None = opt(None, "run directory to continue")
-    history: int = opt(
-        1,
-        "observed frames: the actor and critic see the last N sensed observations (joints, "
-        "setpoints, contacts), oldest first; 1: the thesis' single frame",
-    )
-    privileged_critic: bool = opt(
-        False,
-        "asymmetric critic: the value net also reads the object's pose and velocity and the "
-        "episode's physics (envs.four_finger N_PRIVILEGED); the actor reads what the hand senses",
-    )
-    init_from: str | None = opt(
-        None,
-        "run or policy directory whose policy and value weights and observation statistics "
-        "start this new run (transfer: e.g. a sphere policy starts a cube run); its nets must "
-        "match --pi and --vf",
-    )
-    progress: bool = opt(True, "show a tqdm progress bar")
-    verbose: int = opt(0, "SB3 verbosity")
-
-
-def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
-    """Parse the command line into a :class:`RotateConfig` (exit 2 on bad options)."""
-    parser = build_parser(
-        RotateConfig,
-        description=(__doc__ or "").split("\n\n")[0],
-        epilog="The islands-and-bridges toy: python -m train.ppo islands [options] "
-        "(python -m train.ppo islands --help).",
-    )
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if "--thesis" in argv:
-        parser.set_defaults(**THESIS)
-    cfg = RotateConfig(**vars(parser.parse_args(argv)))
-    ints = (
-        "total_steps",
-        "n_envs",
-        "n_steps",
-        "batch_size",
-        "n_epochs",
-        "episode_steps",
-        "history",
-    )
-    problems = option_problems(cfg, ints)
-    if cfg.eval_episodes < 0 or cfg.checkpoint_every < 1 or cfg.threads < 1 or cfg.workers < 0:
-        problems.append(
-            "--eval-episodes and --workers must be >= 0, --checkpoint-every and --threads >= 1"
-        )
-    if cfg.privileged_critic and cfg.shield != "none":
-        problems.append("--privileged-critic cannot be combined with a --shield")
-    if cfg.shield.startswith("lookahead") and cfg.randomize and cfg.latency_prob > 0:
-        problems.append("--shield lookahead cannot shield action latency: --latency-prob 0")
-    try:  # --corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale
-        training_randomization(replace(cfg, randomize=True))  # Randomization's own checks
-    except FourFingerError as e:
-        problems.append(
-            f"--corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale: {e}"
-        )
-    if cfg.validate_corners < 0:
-        problems.append("--validate-corners must be >= 0")
-    try:  # the env's own check
-        check_start_sampling(cfg.object, cfg.replay_prob, cfg.turned_prob)
-    except FourFingerError as e:
-        problems.append(f"--replay-prob, --turned-prob, --object: {e}")
-    if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:
-        problems.append("--eval-seconds must be > 0")
-    if cfg.init_from is not None:
-        src = policy_dir(Path(cfg.init_from))
-        if cfg.resume is not None:
-            problems.append("--init-from starts a new run; it cannot be given with --resume")
-        elif not (src / "vecnormalize.pkl").is_file() or not any(
-            (src / f).is_file() for f in ("policy.pt", "model.zip")
-        ):
-            problems.append(
-                f"--init-from {cfg.init_from}: no policy.pt or model.zip with vecnormalize.pkl"
-            )
-    try:
-        env_physics(cfg.timestep)
-    except ValueError as e:
-        problems.append(str(e))
-    if problems:
-        parser.error("; ".join(problems))
-    return cfg
-
-
-def env_physics(timestep: float) -> dict[str, float | int]:
-    """``timestep`` [s] and ``frame_skip`` of the env for a physics timestep that divides
-    the policy period ``POLICY_DT`` (0.05 s, the thesis' 20 Hz); ValueError otherwise."""
-    n = POLICY_DT / timestep if np.isfinite(timestep) and timestep > 0 else 0.0
-    if n < 1 or abs(n - round(n)) > 1e-9:
-        raise ValueError(f"--timestep must divide the policy period {POLICY_DT} s, got {timestep}")
-    return {"timestep": float(timestep), "frame_skip": int(round(n))}
 
 
 def make_env(
@@ -377,31 +146,24 @@ def make_env(
     train: bool = True,
     physics: PhysicsSample | None = None,
 ) -> Callable[[], gym.Env]:
-    """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (time limit ``max_steps``, default
-    ``cfg.episode_steps``) -> the shield ``--shield`` (:func:`shields.make_shield`) -> Monitor
-    (the episode's drop and, under a shield, :data:`SHIELD_KEYS`) when ``monitor_file`` is
-    given; seeded with ``seeds``. Training envs (``train``) of a ``--randomize`` run draw their
-    physics per episode; ``physics`` fixes it instead."""
+    """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` with the config's groups as they are
+    (time limit ``max_steps``, default ``cfg.episode_steps``) -> the shield ``--shield``
+    (:func:`shields.make_shield`) -> Monitor (the episode's drop and, under a shield,
+    :data:`SHIELD_KEYS`) when ``monitor_file`` is given; seeded with ``seeds``. Training envs
+    (``train``) start with the config's failure replay and turned starts and, in a
+    ``--randomize`` run, draw their physics per episode; other envs start uniformly over the
+    cache under nominal physics, or under ``physics`` when given."""
 
     def thunk() -> gym.Env:
+        starts = cfg.starts if train else replace(cfg.starts, replay_prob=0.0, turned_prob=0.0)
         env = gym.make(
             ENV_ID,
             object=cfg.object,
-            gravity=cfg.gravity,
-            torsional=cfg.torsional,
-            **env_physics(cfg.timestep),
-            drop_weight=cfg.drop_weight,
-            rotation_cap=cfg.rotation_cap,
-            height_weight=cfg.height_weight,
-            height_from=cfg.height_from,
-            slip_weight=cfg.slip_weight,
-            tilt_weight=cfg.tilt_weight,
-            history=cfg.history,
-            privileged=cfg.privileged_critic,
-            grip=cfg.grip,
+            reward=cfg.reward,
+            sim=cfg.sim,
+            starts=starts,
+            observation=cfg.observation,
             randomize=training_randomization(cfg) if train and physics is None else None,
-            replay_prob=cfg.replay_prob if train else 0.0,
-            turned_prob=cfg.turned_prob if train else 0.0,
             physics=physics,
             max_episode_steps=max_steps or cfg.episode_steps,
         )
@@ -420,17 +182,10 @@ def make_env(
 
 
 def training_randomization(cfg: RotateConfig) -> Randomization | None:
-    """The training envs' randomised physics: the env's :class:`Randomization` with
-    ``cfg.corner_prob``, ``cfg.hard_prob`` and ``cfg.latency_prob``, its ranges scaled by
-    ``cfg.range_scale`` (:meth:`Randomization.scaled`), or ``None`` without ``--randomize``."""
-    if not cfg.randomize:
-        return None
-    return Randomization(
-        corner_prob=cfg.corner_prob,
-        hard_prob=cfg.hard_prob,
-        hard_gain=cfg.hard_gain,
-        latency_prob=cfg.latency_prob,
-    ).scaled(cfg.range_scale)
+    """The training envs' randomised physics, ``cfg.randomization.ranges()``: the env's
+    :class:`Randomization` with the config's sampling probabilities, its ranges scaled by
+    ``range_scale`` (:meth:`Randomization.scaled`), or ``None`` without ``--randomize``."""
+    return cfg.randomization.ranges()
 
 
 def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
@@ -438,7 +193,8 @@ def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
     ``cfg.lr_schedule`` (:func:`train.sb3.learning_rate`);
     :class:`train.pipeline.PipelinedPPO`, which pipelines its rollouts over a
     ``ChunkedVecEnv`` with parts and is plain SB3 PPO on any other env."""
-    actor_obs = N_OBS * cfg.history if cfg.privileged_critic else None
+    obs = cfg.observation
+    actor_obs = N_OBS * obs.history if obs.privileged else None
     return new_ppo(cfg, vec_env, learning_rate(cfg), algo=PipelinedPPO, actor_obs=actor_obs)
 
 
@@ -537,105 +293,149 @@ class EvalCallback(BaseCallback):
         return res
 
 
-def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    """Train (or resume), evaluate, save; returns the final evaluation."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    cfg = parse_config(argv)
-    torch.set_num_threads(cfg.threads)
-    shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
-    name = f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
-    keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
-    finetune = tuple(f for f in FINETUNE if given(argv, f)) if cfg.resume is not None else ()
-    cfg, run_dir = open_run(cfg, name, keep=keep + finetune)
-    grasp_cache(
-        cfg.object, cfg.gravity, **env_physics(cfg.timestep), grip=cfg.grip
-    )  # build the start-state cache once, before any worker
-    done = saved_timesteps(run_dir) if cfg.resume is not None else 0
-    if cfg.resume is not None and given(argv, "randomize") and not cfg.randomize:
-        cfg = start_randomizing(cfg, run_dir, done)
-    if finetune:
-        start_finetune(run_dir, {f: getattr(cfg, f) for f in finetune}, done)
-    seeds = RunSeeds(cfg.seed, segment=done)
-    seed_everything(seeds.global_seed)
-    mon = run_dir / "monitor"
-    mon.mkdir(exist_ok=True)
-    thunks = [
-        make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
-        for i, s in enumerate(seeds.envs("train", cfg.n_envs))
-    ]
-    vec: VecEnv = make_vec_env(thunks, cfg.workers, parts=2 if cfg.pipeline else 1)
-    stats = run_dir / "vecnormalize.pkl"
-    if cfg.resume is not None and stats.is_file():
-        vec = VecNormalize.load(str(stats), vec)
-    elif cfg.init_from is not None:
+@dataclass(frozen=True)
+class RotationEvals:
+    """The rotation run's evaluation envs: ``validation`` (nominal physics, training start
+    grasps on the validation streams) and ``corners`` (one per corner of the randomised
+    ranges, with ``--validate-corners``; else none)."""
+
+    validation: list[gym.Env]
+    corners: list[gym.Env]
+
+
+class RotationTask(Task):
+    """The four-finger rotation main job as a :class:`train.trainer.Task` (module doc)."""
+
+    name = "rotation"
+    algo = PipelinedPPO
+
+    def parse(self, argv: Sequence[str]) -> RotateConfig:
+        return parse_config(argv)
+
+    def run_name(self, cfg: RotateConfig) -> str:
+        shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        return f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{stamp}"
+
+    def resume_options(self, cfg: RotateConfig, argv: Sequence[str]) -> tuple[str, ...]:
+        keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
+        return keep + _finetune(cfg, argv)
+
+    def prepare(self, cfg: RotateConfig, run_dir: Path, argv: Sequence[str], done: int) -> Any:
+        """Build the start-state cache once, before any worker; on resume, record a switch to
+        randomised physics and the fine-tune options given (:mod:`train.runfiles`)."""
+        s, starts = cfg.sim, cfg.starts
+        seed = GRASP_SETS[starts.grasps]
+        grasp_cache(cfg.object, s.gravity, starts.n_grasps, seed=seed, timestep=s.timestep,
+                    frame_skip=s.frame_skip, grip=starts.grip)  # fmt: skip
+        if cfg.resume is not None and given(argv, "randomize") and not cfg.randomization.randomize:
+            cfg = start_randomizing(cfg, run_dir, done)
+        finetune = _finetune(cfg, argv)
+        if finetune:
+            start_finetune(cfg, run_dir, finetune, done)
+        return cfg
+
+    def train_env(self, cfg: RotateConfig, seeds: RunSeeds, run_dir: Path) -> VecEnv:
+        """``cfg.n_envs`` training envs (one Monitor file each) stepped by ``cfg.workers``
+        processes, under VecNormalize: the run's statistics on resume, those of
+        ``--init-from`` for a transfer, else fresh."""
+        mon = run_dir / "monitor"
+        mon.mkdir(exist_ok=True)
+        thunks = [
+            make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
+            for i, s in enumerate(seeds.envs("train", cfg.n_envs))
+        ]
+        vec: VecEnv = make_vec_env(thunks, cfg.workers, parts=2 if cfg.pipeline else 1)
+        stats = run_dir / "vecnormalize.pkl"
+        if cfg.resume is not None and stats.is_file():
+            return VecNormalize.load(str(stats), vec)
+        if cfg.init_from is None:
+            return VecNormalize(vec, gamma=cfg.gamma)
         try:
-            priv = N_PRIVILEGED if cfg.privileged_critic else 0
-            vec = init_normalizer(vec, Path(cfg.init_from), priv)
+            priv = N_PRIVILEGED if cfg.observation.privileged else 0
+            return init_normalizer(vec, Path(cfg.init_from), priv)
         except ValueError as e:
             vec.close()
             raise SystemExit(f"python -m train.ppo: error: {e}") from None
-    else:
-        vec = VecNormalize(vec, gamma=cfg.gamma)
-    max_eval = int(round(cfg.eval_seconds * 20))
-    n_eval = max(1, min(cfg.eval_episodes, 10))
-    eval_envs = [
-        make_env(cfg, s, max_steps=max_eval, train=False)()
-        for s in seeds.envs("validation", n_eval)
-    ]
-    corner_envs = []
-    if cfg.randomize and cfg.validate_corners:
-        cases = corners(training_randomization(cfg))
-        corner_envs = [
-            make_env(cfg, s, max_steps=max_eval, train=False, physics=c)()
-            for s, c in zip(
-                seeds.envs("validation", n_eval + len(cases))[n_eval:], cases, strict=True
-            )
+
+    def eval_envs(self, cfg: RotateConfig, seeds: RunSeeds) -> RotationEvals:
+        max_eval = int(round(cfg.eval_seconds * 20))
+        n_eval = max(1, min(cfg.eval_episodes, 10))
+        validation = [
+            make_env(cfg, s, max_steps=max_eval, train=False)()
+            for s in seeds.envs("validation", n_eval)
         ]
-    if cfg.resume is not None:
-        model = PipelinedPPO.load(run_dir / "model.zip", env=vec, device="cpu", seed=None)
-    else:
+        corner_envs = []
+        if cfg.randomization.randomize and cfg.validate_corners:
+            cases = corners(training_randomization(cfg))
+            streams = seeds.envs("validation", n_eval + len(cases))[n_eval:]
+            corner_envs = [
+                make_env(cfg, s, max_steps=max_eval, train=False, physics=c)()
+                for s, c in zip(streams, cases, strict=True)
+            ]
+        return RotationEvals(validation, corner_envs)
+
+    def new_model(self, cfg: RotateConfig, vec: VecEnv) -> PPO:
         model = build_model(cfg, vec)
         if cfg.init_from is not None:
             try:
                 init_weights(model, Path(cfg.init_from))
             except ValueError as e:
-                vec.close()
                 raise SystemExit(f"python -m train.ppo: error: {e}") from None
-    model.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if cfg.verbose else [])))
-    ev = EvalCallback(cfg, run_dir, eval_envs, cfg.checkpoint_every, corner_envs)
-    callbacks: list[BaseCallback] = [ev]
-    if cfg.workers:
-        callbacks.append(RolloutThreads(cfg.threads))
-    if cfg.progress:
-        callbacks.append(progress_bar(cfg, desc=run_dir.name))
-    t0 = time.perf_counter()
-    model.learn(cfg.total_steps, callback=callbacks, reset_num_timesteps=cfg.resume is None)
-    train_s = time.perf_counter() - t0
-    checkpoint(model, run_dir)
-    vec.training = False
-    result = ev.evaluate() if cfg.eval_episodes else {}
-    result = {
-        **result,
-        "num_timesteps": int(model.num_timesteps),
-        "train_seconds": round(train_s, 1),
-        "steps_per_second": round((model.num_timesteps - done) / train_s, 1),
-        "eval_episode_seconds": cfg.eval_seconds,
-        "best": ev.best,
-    }
-    (run_dir / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    plot_curve(run_dir, TARGET_SPEED)
-    vec.close()
-    for env in [*eval_envs, *corner_envs]:
-        env.close()
-    print(
-        f"{run_dir}: {result['num_timesteps']} steps in {train_s:.0f} s "
-        f"({result['steps_per_second']:.0f} env steps/s); validation on training start "
-        f"grasps, deterministic policy over {result.get('episodes', 0)} x "
-        f"{cfg.eval_seconds:g} s: {result.get('speed_rad_s', float('nan')):.3f} rad/s, "
-        f"drop rate {result.get('drop_rate', float('nan')):.3f} (held-out grasps: "
-        f"python -m train.heldout {run_dir})"
-    )
-    return {**result, "run_dir": str(run_dir)}
+        return model
+
+    def callbacks(
+        self, cfg: RotateConfig, run_dir: Path, evals: RotationEvals
+    ) -> list[BaseCallback]:
+        ev = EvalCallback(cfg, run_dir, evals.validation, cfg.checkpoint_every, evals.corners)
+        return [ev, RolloutThreads(cfg.threads)] if cfg.workers else [ev]
+
+    def evaluate(self, run: Run, train_seconds: float) -> dict[str, Any]:
+        """The last validation (also a row of eval.csv) with the run's size and speed, the
+        evaluation episodes' length and the best validated checkpoint."""
+        cfg, model = run.cfg, run.model
+        (ev,) = [c for c in run.callbacks if isinstance(c, EvalCallback)]
+        run.vec.training = False
+        result = ev.evaluate() if cfg.eval_episodes else {}
+        return {
+            **result,
+            "num_timesteps": int(model.num_timesteps),
+            "train_seconds": round(train_seconds, 1),
+            "steps_per_second": round((model.num_timesteps - run.done) / train_seconds, 1),
+            "eval_episode_seconds": cfg.eval_seconds,
+            "best": ev.best,
+        }
+
+    def summary(self, run: Run, result: dict[str, Any], train_seconds: float) -> str:
+        return (
+            f"{run.dir}: {result['num_timesteps']} steps in {train_seconds:.0f} s "
+            f"({result['steps_per_second']:.0f} env steps/s); validation on training start "
+            f"grasps, deterministic policy over {result.get('episodes', 0)} x "
+            f"{run.cfg.eval_seconds:g} s: {result.get('speed_rad_s', float('nan')):.3f} rad/s, "
+            f"drop rate {result.get('drop_rate', float('nan')):.3f} (held-out grasps: "
+            f"python -m train.heldout {run.dir})"
+        )
+
+    def close(self, run: Run) -> None:
+        """Redraw curve.png, close the envs."""
+        plot_curve(run.dir, TARGET_SPEED)
+        run.vec.close()
+        for env in [*run.evals.validation, *run.evals.corners]:
+            env.close()
+
+
+def _finetune(cfg: RotateConfig, argv: Sequence[str]) -> tuple[str, ...]:
+    """The fine-tune options (:data:`train.runfiles.FINETUNE`) given with ``--resume``."""
+    return tuple(f for f in FINETUNE if given(argv, f)) if cfg.resume is not None else ()
+
+
+TASK = RotationTask()
+
+
+def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    """Train (or resume), evaluate, save (:func:`train.trainer.train` with :data:`TASK`);
+    returns the final evaluation."""
+    return train(TASK, argv)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ changes the run (:func:`start_randomizing`, :data:`FINETUNE`, :func:`start_finet
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import pickle
 import shutil
@@ -23,6 +22,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
+from train.options import from_saved, get_option, record_options, set_options
 from train.sb3 import PrivilegedCriticPolicy
 
 __all__ = [
@@ -173,8 +173,10 @@ def start_randomizing(cfg: Any, run_dir: Path, done: int) -> Any:
     physics (a fine-tune). config.json records it (``randomize``, ``randomized_from_step``);
     the nominal run's ``best/`` moves to ``best_nominal/`` so that ``best/`` is chosen among
     the randomised checkpoints."""
-    _record(run_dir, {"randomize": True, "randomized_from_step": done}, best_aside="best_nominal")
-    return dataclasses.replace(cfg, randomize=True)
+    cfg = set_options(cfg, {"randomize": True})
+    record_options(run_dir / "config.json", cfg, ["randomize"], randomized_from_step=done)
+    _best_aside(run_dir, "best_nominal")
+    return cfg
 
 
 FINETUNE = (
@@ -208,27 +210,25 @@ def given(argv: Sequence[str], field: str) -> bool:
     return any(a == flag or a.startswith(flag + "=") for a in argv)
 
 
-def start_finetune(run_dir: Path, changed: dict[str, Any], done: int) -> None:
-    """Record fine-tune options given with ``--resume`` in config.json (with
-    ``finetune_from_step``); when corner validation starts, or the ranges whose corners are
-    validated change (``range_scale``), the earlier ``best/`` (chosen on other figures) moves
-    to ``best_previous/``."""
-    saved = json.loads((run_dir / "config.json").read_text())
-    starts_corners = changed.get("validate_corners", 0) and not saved.get("validate_corners", 0)
-    scale = saved.get("range_scale", 1.0)
-    new_range = changed.get("range_scale", scale) != scale
-    _record(
-        run_dir,
-        {**changed, "finetune_from_step": done},
-        best_aside="best_previous" if starts_corners or new_range else None,
-    )
-
-
-def _record(run_dir: Path, fields: dict[str, Any], best_aside: str | None) -> None:
-    """Update ``fields`` in the run's config.json; with ``best_aside``, move an existing
-    ``best/`` to that name (replacing an earlier one) so that ``best/`` is chosen afresh."""
+def start_finetune(cfg: Any, run_dir: Path, changed: Sequence[str], done: int) -> None:
+    """Record the fine-tune options ``changed`` (given with ``--resume``) at their values in
+    ``cfg`` in config.json (with ``finetune_from_step``); when corner validation starts, or
+    the ranges whose corners are validated change (``range_scale``), the earlier ``best/``
+    (chosen on other figures) moves to ``best_previous/``."""
     path = run_dir / "config.json"
-    path.write_text(json.dumps({**json.loads(path.read_text()), **fields}, indent=2) + "\n")
-    if best_aside is not None and (run_dir / "best").is_dir():
-        shutil.rmtree(run_dir / best_aside, ignore_errors=True)
-        (run_dir / "best").rename(run_dir / best_aside)
+    saved = from_saved(type(cfg), json.loads(path.read_text()))
+    new = {f: get_option(cfg, f) for f in changed}
+    starts_corners = new.get("validate_corners", 0) and not get_option(saved, "validate_corners")
+    scale = get_option(saved, "range_scale")
+    new_range = new.get("range_scale", scale) != scale
+    record_options(path, cfg, changed, finetune_from_step=done)
+    if starts_corners or new_range:
+        _best_aside(run_dir, "best_previous")
+
+
+def _best_aside(run_dir: Path, name: str) -> None:
+    """Move an existing ``best/`` to ``name`` (replacing an earlier one) so that ``best/``
+    is chosen afresh."""
+    if (run_dir / "best").is_dir():
+        shutil.rmtree(run_dir / name, ignore_errors=True)
+        (run_dir / "best").rename(run_dir / name)

@@ -1,8 +1,9 @@
 """Plumbing shared by the PPO trainers (stable-baselines3): configs, run directories, the model.
 
-The trainers (:mod:`train.rotation`, the main job, and :mod:`train.islands_ppo`) follow the
-CleanRL shape: one dataclass config whose every field is a command-line option
-(:func:`opt`, :func:`build_parser`), the seeds set in one block (:func:`seed_everything`
+The trainers (:mod:`train.rotation`, the main job, and :mod:`train.islands_ppo`, run by the
+one skeleton :func:`train.trainer.train`) follow the CleanRL shape: one dataclass config
+whose every field is a command-line option or a group of them (:mod:`train.options`:
+:func:`opt`, :func:`build_parser`), the seeds set in one block (:func:`seed_everything`
 with :class:`train.seeding.RunSeeds`), a run directory with its config.json
 (:func:`open_run`, resumable: :func:`saved_timesteps`), SB3 PPO built from the config
 (:func:`new_ppo`) and a progress bar over env steps whose rate and time left cover the
@@ -11,7 +12,6 @@ whole run, PPO updates and evaluations included (:class:`TqdmProgress`).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
@@ -19,7 +19,6 @@ import random
 import time
 import zipfile
 from collections.abc import Callable, Sequence
-from dataclasses import field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,7 @@ from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 from tqdm import tqdm
 
-from stability.cli import ArgumentParser
+from train.options import build_parser, from_saved, get_option, opt, set_options, to_json
 
 __all__ = [
     "ActorView",
@@ -54,58 +53,6 @@ __all__ = [
 ]
 
 
-def opt(default: Any, help: str, **kw: Any) -> Any:
-    """A dataclass field with its ``--help`` text (and argparse extras such as choices)."""
-    if isinstance(default, list):
-        return field(default_factory=lambda: list(default), metadata={"help": help, **kw})
-    return field(default=default, metadata={"help": help, **kw})
-
-
-def _type_of(f: dataclasses.Field) -> tuple[Callable[[str], Any], bool]:
-    """The scalar argparse ``type`` of a field and whether it is a list."""
-    t = str(f.type)
-    if t.startswith("list["):
-        return {"list[int]": int, "list[float]": float}.get(t, str), True
-    for name, conv in (("bool", bool), ("int", int), ("float", float)):
-        if t == name:
-            return conv, False
-    return str, False
-
-
-def build_parser(
-    cls: type,
-    prog: str = "python -m train.ppo",
-    description: str | None = None,
-    epilog: str | None = None,
-) -> argparse.ArgumentParser:
-    """An argparse parser generated from the fields of the dataclass ``cls``.
-
-    Each field ``foo_bar`` becomes ``--foo-bar`` with the field's ``help`` and
-    ``choices`` metadata; bools become ``--x/--no-x``, lists take several values. Errors
-    print one line (:class:`stability.cli.ArgumentParser`) and exit with status 2.
-    """
-    p = ArgumentParser(
-        prog=prog,
-        description=description,
-        epilog=epilog,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
-    for f in dataclasses.fields(cls):
-        flag = "--" + f.name.replace("_", "-")
-        conv, is_list = _type_of(f)
-        default = f.default_factory() if f.default is dataclasses.MISSING else f.default
-        kw: dict[str, Any] = {"help": f.metadata["help"], "default": default, "dest": f.name}
-        if "choices" in f.metadata:
-            kw["choices"] = f.metadata["choices"]
-        if conv is bool:
-            p.add_argument(flag, action=argparse.BooleanOptionalAction, **kw)
-        elif is_list:
-            p.add_argument(flag, type=conv, nargs="+", metavar="N" if conv is int else None, **kw)
-        else:
-            p.add_argument(flag, type=conv, **kw)
-    return p
-
-
 def option_problems(cfg: Any, positive: Sequence[str]) -> list[str]:
     """The checks every PPO config shares: the fields ``positive`` >= 1, net sizes >= 1,
     ``seed >= 0`` and a ``--resume`` directory that holds a model.zip."""
@@ -118,29 +65,28 @@ def option_problems(cfg: Any, positive: Sequence[str]) -> list[str]:
     return problems
 
 
-def open_run(cfg: Any, name: str, keep: Sequence[str]) -> tuple[Any, Path]:
+def open_run(cfg: Any, name: str, keep: Sequence[str], task: str | None = None) -> tuple[Any, Path]:
     """The config and directory of a run.
 
-    With ``cfg.resume``: the saved config.json of that run, except the fields ``keep`` (and
-    ``resume``), which come from ``cfg`` (the saved run decides everything except how long
-    to go on and how to report). Otherwise a new directory ``cfg.out/name`` (``_`` appended
-    while it exists) with ``cfg`` written to config.json.
+    With ``cfg.resume``: the saved config.json of that run (:func:`train.options.from_saved`:
+    either layout), except the options ``keep`` (and ``resume``), which come from ``cfg``
+    (the saved run decides everything except how long to go on and how to report).
+    Otherwise a new directory ``cfg.out/name`` (``_`` appended while it exists) with ``cfg``
+    written to config.json (:func:`train.options.to_json`), led by ``"task": task`` when
+    given: the trainer that ``--resume`` picks.
     """
-    cls = type(cfg)
     if cfg.resume is not None:
         run_dir = Path(cfg.resume)
-        saved = json.loads((run_dir / "config.json").read_text())
-        fields = cls.__dataclass_fields__
-        restored = cls(**{k: v for k, v in saved.items() if k in fields})
-        return dataclasses.replace(
-            restored, resume=cfg.resume, **{k: getattr(cfg, k) for k in keep}
-        ), run_dir
+        saved = from_saved(type(cfg), json.loads((run_dir / "config.json").read_text()))
+        kept = {k: get_option(cfg, k) for k in keep}
+        return set_options(saved, kept, resume=cfg.resume), run_dir
     run_dir = Path(cfg.out) / name
     while run_dir.exists():  # two runs started in the same second
         run_dir = run_dir.with_name(run_dir.name + "_")
     run_dir.mkdir(parents=True)
-    config = {**dataclasses.asdict(cfg), "resume": None}
-    (run_dir / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    config = dataclasses.replace(cfg, resume=None)
+    text = to_json(config, task=task) if task is not None else to_json(config)
+    (run_dir / "config.json").write_text(text)
     return cfg, run_dir
 
 

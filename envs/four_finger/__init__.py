@@ -8,6 +8,9 @@ the gymnasium env ``ihm/FourFingerRotate-v0``.
   (:func:`generate_grasps`, :func:`grasp_cache`);
 - :mod:`~envs.four_finger.env`: the env :class:`FourFingerRotate` (its spaces, reward and
   episode end are documented there) and :func:`yaw_rate`;
+- :mod:`~envs.four_finger.settings`: the env's settings in groups (reward, simulation, starts,
+  observation, rendering: :class:`RewardSettings`, :class:`SimSettings`,
+  :class:`StartSettings`, :class:`ObservationSettings`, :class:`RenderSettings`);
 - :mod:`~envs.four_finger.randomize`: randomised physics (friction, torsional friction, mass,
   servo gains, latency, sensor noise; :class:`Randomization`, :func:`corners`);
 - :mod:`~envs.four_finger.states`: saved env states and one policy step from them under given
@@ -60,6 +63,14 @@ from envs.four_finger.physics import (
     scene_name,
 )
 from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization, corners
+from envs.four_finger.settings import (
+    ObservationSettings,
+    RenderSettings,
+    RewardSettings,
+    SimSettings,
+    StartSettings,
+    apply_overrides,
+)
 from envs.four_finger.states import STATE_SPEC, policy_step_outcomes, save_state
 
 __all__ = [
@@ -90,9 +101,15 @@ __all__ = [
     "FourFingerRotate",
     "GraspCache",
     "ModelScaler",
+    "ObservationSettings",
     "Physics",
     "PhysicsSample",
     "Randomization",
+    "RenderSettings",
+    "RewardSettings",
+    "SimSettings",
+    "StartSettings",
+    "apply_overrides",
     "check_start_sampling",
     "corners",
     "cube_turn",

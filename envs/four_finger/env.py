@@ -6,6 +6,18 @@ the policy is rewarded for turning it about the world vertical axis. Gymnasium
 ``MujocoEnv`` conventions (``model``, ``data``, ``frame_skip``, ``dt``,
 ``render_mode="rgb_array"``), without its ``imageio`` dependency.
 
+## Settings
+
+The env's settings come in groups (:mod:`envs.four_finger.settings`), each a frozen
+dataclass that checks its values: ``reward`` (:class:`RewardSettings`), ``sim``
+(:class:`SimSettings`), ``starts`` (:class:`StartSettings`), ``observation``
+(:class:`ObservationSettings`), ``render`` (:class:`RenderSettings`), and the randomised
+physics ``randomize`` (:class:`Randomization`, drawn per episode) or ``physics``
+(:class:`PhysicsSample`, fixed). A trainer keeps the groups in its config and passes them as
+they are; any field can also be given by name on its own
+(``FourFingerRotate(drop_weight=1.0, history=3)``, ``gym.make(..., grip="firm")``), set on
+top of its group. Below, ``history=k``, ``replay_prob=p`` etc. name such fields.
+
 ## Action Space
 
 ``Box(-1, 1, (12,), float32)``, one entry per actuator in the order of
@@ -149,14 +161,21 @@ from envs.four_finger.cache import GRASP_SETS, grasp_cache
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     DROP_Z,
-    FRAME_SKIP,
     MAX_FORCE,
-    TIMESTEP,
     FourFingerError,
     Physics,
     scene_name,
 )
 from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization
+from envs.four_finger.settings import (
+    HEIGHT_FROM,
+    ObservationSettings,
+    RenderSettings,
+    RewardSettings,
+    SimSettings,
+    StartSettings,
+    apply_overrides,
+)
 from ihm.hands import four_finger as ff
 
 __all__ = ["HEIGHT_FROM", "HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_tilt", "z_twist"]
@@ -164,7 +183,6 @@ __all__ = ["HEIGHT_FROM", "HOLD_Z", "N_OBS", "FourFingerRotate", "yaw_rate", "z_
 N_OBS = 2 * ff.NU + 4 * len(CONTACT_LINKS)
 N_PRIVILEGED = 18  # privileged=True: object pose (7) and velocity (6), episode physics (5)
 HOLD_Z = 0.07  # [m] object centre height below which the height term penalises sag
-HEIGHT_FROM = ("hold", "start")  # the height term's references: HOLD_Z, the start height
 TURNED = math.pi / 8  # [rad] turned_prob: a start with |cube_turn| >= this is "turned"
 REPLAY_SIZE = 64  # failure replay: dropped starts an env remembers (the last ones)
 
@@ -232,11 +250,7 @@ def check_start_sampling(object: str, replay_prob: float, turned_prob: float) ->
     """Raise :class:`FourFingerError` unless ``replay_prob`` and ``turned_prob`` are in
     [0, 1] and turned starts are asked only of the cube (module doc, "Failure replay",
     "Turned cube starts"): the env's check, also run by ``python -m train.ppo``."""
-    for name, v in (("replay_prob", replay_prob), ("turned_prob", turned_prob)):
-        if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
-            raise FourFingerError(f"{name} must be in [0, 1], got {v!r}")
-    if turned_prob > 0 and object != "cube":
-        raise FourFingerError(f"turned_prob is for the cube, not the {object}")
+    StartSettings(replay_prob=replay_prob, turned_prob=turned_prob).for_object(object)
 
 
 class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -245,40 +259,39 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     Parameters
     ----------
     object : ``"sphere"`` (the thesis'), ``"cylinder"`` or ``"cube"``.
-    gravity : gravity on (-9.81 m/s^2 along -z) or off.
-    max_setpoint_step : ``q^max`` of the thesis [rad per policy step].
-    frame_skip : physics substeps per policy step.
-    timestep : physics timestep [s] (policy period ``dt = frame_skip * timestep``).
-    drop_weight, action_weight, height_weight, slip_weight, tilt_weight : weights of the
-        optional reward terms (module doc).
-    height_from : the height term's reference, ``"hold"`` (``HOLD_Z``) or ``"start"`` (the
-        object's start height; module doc).
-    rotation_cap : bound of the rotation reward [rad/s] (``inf``: none).
+    reward : :class:`~envs.four_finger.settings.RewardSettings`, the reward's terms (module
+        doc, "Rewards"); default: the thesis' uncapped rotation rate alone.
+    sim : :class:`~envs.four_finger.settings.SimSettings`: gravity, torsional friction,
+        timestep [s], ``frame_skip`` substeps per policy step (policy period
+        ``dt = frame_skip * timestep``), solver and the setpoint step ``q^max`` [rad].
+    starts : :class:`~envs.four_finger.settings.StartSettings`: the start-grasp set
+        (``"train"`` or ``"test"``, held out) and cache size, the grip (``"nominal"``, the
+        thesis' inward grip, or ``"firm"``: also lifting the object and 1 N harder, verified to
+        hold still under the worst randomised physics), failure replay and turned cube starts
+        (module doc).
+    observation : :class:`~envs.four_finger.settings.ObservationSettings`: observed frames
+        (``history``) and the critic's privileged state (module doc).
     randomize : a :class:`~envs.four_finger.randomize.Randomization` drawn at every reset, or
         ``None``; physics : a fixed :class:`~envs.four_finger.randomize.PhysicsSample`.
-    grasps : start-grasp set, ``"train"`` or ``"test"`` (held out).
-    n_grasps : size of the starting-state cache.
-    privileged : append the critic's privileged state to the observation (module doc).
-    replay_prob : probability that a reset restarts a start this env dropped (module doc,
-        "Failure replay"); 0: never.
-    turned_prob : probability that a reset starts from a turned cube (module doc, "Turned
-        cube starts"); 0: the cached grasps uniformly.
-    grip : how the start grasps squeeze, ``"nominal"`` (the thesis' inward grip) or
-        ``"firm"`` (also lifting the object and 1 N harder, verified to hold still under
-        the worst randomised physics): :data:`envs.four_finger.cache.GRIPS`.
-    render_mode : ``None`` or ``"rgb_array"``; ``width``, ``height`` [px];
-        ``camera``: ``"side"`` or ``"top"``.
-    torsional : contacts with the skin's torsional friction (``condim`` 4, coefficient
-        ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m x the normal force,
-        that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis' point
-        contact), a sphere pinched between two antipodal points spins freely about the
-        line through them, which nothing resists (docs/four_finger.md).
-    solver : MuJoCo constraint solver, ``"pgs"`` (default) or ``"newton"`` (the hand
-        model's). Both solve the same convex contact problem; PGS is 5x cheaper on it.
+    render_mode : ``None`` or ``"rgb_array"``; render : the
+        :class:`~envs.four_finger.settings.RenderSettings` (image size [px], camera).
+    **overrides : fields of the groups by name, set on top of them (``drop_weight=1.0``,
+        ``gravity=False``, ``history=3``, ``grasps="test"``):
+        :func:`~envs.four_finger.settings.apply_overrides`.
 
-    Attributes: ``physics`` (:class:`~envs.four_finger.physics.Physics`: ``model``, ``data``
-    and the contact observation), ``grasps`` (the :class:`~envs.four_finger.cache.GraspCache`
-    of starting states).
+    The simulation (``sim``): ``torsional`` contacts have the skin's torsional friction
+    (``condim`` 4, coefficient ``TORSIONAL_FRICTION`` = 0.005 m: the torque limit is 0.005 m
+    x the normal force, that of a ~7 mm soft contact patch). Off (``condim`` 3, the thesis'
+    point contact), a sphere pinched between two antipodal points spins freely about the
+    line through them, which nothing resists (docs/four_finger.md). ``solver``: MuJoCo's
+    ``"pgs"`` (default) or ``"newton"`` (the hand model's); both solve the same convex contact
+    problem, PGS 5x cheaper on it.
+
+    Attributes: the groups as given (``reward``, ``sim``, ``starts``, ``observation``, and
+    ``render_settings`` beside the method ``render``), ``physics``
+    (:class:`~envs.four_finger.physics.Physics`: ``model``, ``data`` and the contact
+    observation), ``grasps`` (the :class:`~envs.four_finger.cache.GraspCache`
+    of starting states), ``frame_skip``, ``max_setpoint_step`` and ``dt`` (MujocoEnv's names).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
@@ -286,130 +299,59 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def __init__(
         self,
         object: str = "sphere",
-        gravity: bool = True,
         *,
-        max_setpoint_step: float = 0.05,
-        frame_skip: int = FRAME_SKIP,
-        timestep: float = TIMESTEP,
-        drop_weight: float = 0.0,
-        action_weight: float = 0.0,
-        height_weight: float = 0.0,
-        height_from: str = "hold",
-        slip_weight: float = 0.0,
-        tilt_weight: float = 0.0,
-        rotation_cap: float = math.inf,
+        reward: RewardSettings | None = None,
+        sim: SimSettings | None = None,
+        starts: StartSettings | None = None,
+        observation: ObservationSettings | None = None,
         randomize: Randomization | None = None,
         physics: PhysicsSample | None = None,
-        grasps: str = "train",
-        n_grasps: int = 256,
-        grip: str = "nominal",
         render_mode: str | None = None,
-        width: int = 480,
-        height: int = 480,
-        camera: str = "side",
-        solver: str = "pgs",
-        torsional: bool = True,
-        history: int = 1,
-        privileged: bool = False,
-        replay_prob: float = 0.0,
-        turned_prob: float = 0.0,
+        render: RenderSettings | None = None,
+        **overrides: Any,
     ) -> None:
         scene_name(object)
-        if not isinstance(history, (int, np.integer)) or history < 1:
-            raise FourFingerError(f"history must be an integer >= 1, got {history!r}")
-        if not isinstance(gravity, (bool, np.bool_)):
-            raise FourFingerError(f"gravity must be True or False, got {gravity!r}")
-        for name, v in (
-            ("max_setpoint_step", max_setpoint_step),
-            ("timestep", timestep),
-            ("drop_weight", drop_weight),
-            ("action_weight", action_weight),
-            ("height_weight", height_weight),
-            ("slip_weight", slip_weight),
-            ("tilt_weight", tilt_weight),
-        ):
-            if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
-                raise FourFingerError(f"{name} must be a finite number >= 0, got {v!r}")
-        if (
-            not isinstance(rotation_cap, (int, float))
-            or math.isnan(rotation_cap)
-            or rotation_cap <= 0
-        ):
-            raise FourFingerError(f"rotation_cap must be > 0 (inf: no cap), got {rotation_cap!r}")
-        check_start_sampling(object, replay_prob, turned_prob)
-        if max_setpoint_step <= 0 or timestep <= 0:
-            raise FourFingerError("max_setpoint_step and timestep must be > 0")
-        if not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
-            raise FourFingerError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
-        if not isinstance(n_grasps, (int, np.integer)) or n_grasps < 1:
-            raise FourFingerError(f"n_grasps must be an integer >= 1, got {n_grasps!r}")
-        if grasps not in GRASP_SETS:
-            raise FourFingerError(f"grasps must be one of {list(GRASP_SETS)}, got {grasps!r}")
+        groups = apply_overrides(
+            {
+                "reward": RewardSettings() if reward is None else reward,
+                "sim": SimSettings() if sim is None else sim,
+                "starts": StartSettings() if starts is None else starts,
+                "observation": ObservationSettings() if observation is None else observation,
+                "render": RenderSettings() if render is None else render,
+            },
+            overrides,
+        )
+        self.reward: RewardSettings = groups["reward"]
+        self.sim: SimSettings = groups["sim"]
+        self.starts: StartSettings = groups["starts"].for_object(object)
+        self.observation: ObservationSettings = groups["observation"]
+        self.render_settings: RenderSettings = groups["render"]
         if randomize is not None and physics is not None:
             raise FourFingerError("give randomize (drawn per episode) or physics (fixed), not both")
         if render_mode not in (None, "rgb_array"):
             raise FourFingerError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if height_from not in HEIGHT_FROM:
-            raise FourFingerError(f"height_from must be one of {HEIGHT_FROM}, got {height_from!r}")
-        if camera not in ("side", "top"):
-            raise FourFingerError(f"camera must be 'side' or 'top', got {camera!r}")
         self.object = object
-        self.gravity = bool(gravity)
-        self.max_setpoint_step = float(max_setpoint_step)
-        self.frame_skip = int(frame_skip)
-        self.drop_weight = float(drop_weight)
-        self.action_weight = float(action_weight)
-        self.height_weight = float(height_weight)
-        self.height_from = height_from
-        self._z_ref = HOLD_Z  # the height term's reference [m] (reset sets it for "start")
-        self.slip_weight = float(slip_weight)
-        self.tilt_weight = float(tilt_weight)
-        self.rotation_cap = float(rotation_cap)
-        self.replay_prob = float(replay_prob)
-        self._failed: list[tuple[int, PhysicsSample | None]] = []  # failure replay's buffer
-        self._grasp = 0
         self.render_mode = render_mode
-        self.width, self.height, self.camera = width, height, camera
-        self.physics = Physics(object, self.gravity, float(timestep), solver, bool(torsional))
+        s = self.sim
+        self.physics = Physics(object, s.gravity, s.timestep, s.solver, s.torsional)
         self.model, self.data = self.physics.model, self.physics.data
         self.dt = self.model.opt.timestep * self.frame_skip
         self.grasps = grasp_cache(
             object,
-            self.gravity,
-            int(n_grasps),
-            seed=GRASP_SETS[grasps],
-            timestep=float(timestep),
+            s.gravity,
+            self.starts.n_grasps,
+            seed=GRASP_SETS[self.starts.grasps],
+            timestep=s.timestep,
             frame_skip=self.frame_skip,
-            grip=grip,
+            grip=self.starts.grip,
         )
-        self.grip = grip
-        self.turned_prob = float(turned_prob)
-        self._turned = np.zeros(0, dtype=np.intp)  # cache indices of turned starts (turned_prob)
-        if self.turned_prob > 0:
-            quats = self.grasps.qpos[:, self.physics.obj_qpos + 3 : self.physics.obj_qpos + 7]
-            self._turned = np.flatnonzero([abs(cube_turn(q)) >= TURNED for q in quats])
-            if not len(self._turned):
-                raise FourFingerError("turned_prob: no cached start grasp has the cube turned")
-        self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
-        lo = np.concatenate(
-            [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
-        )
-        hi = np.concatenate(
-            [np.full(ff.NQ, np.pi), self.physics.ctrl_hi, np.tile([0.25, 0.25, 0.25, MAX_FORCE], 8)]
-        )
-        self._lo, self._hi = lo.astype(np.float32), hi.astype(np.float32)
-        self.history = int(history)
-        self.privileged = bool(privileged)
-        self._priv_hi = np.repeat(np.float32([0.25, 1.0, 20.0, 5.0]), [3, 4, 6, 5])
-        self._priv_lo = np.where(np.arange(N_PRIVILEGED) < 13, -self._priv_hi, 0.0).astype(
-            np.float32
-        )
-        lo, hi = np.tile(self._lo, self.history), np.tile(self._hi, self.history)
-        if self.privileged:
-            lo, hi = np.concatenate([lo, self._priv_lo]), np.concatenate([hi, self._priv_hi])
-        self.observation_space = spaces.Box(lo, hi)
+        self._turned = self._turned_starts()
+        self._build_spaces()
+        self._z_ref = HOLD_Z  # the height term's reference [m] (reset sets it for "start")
+        self._failed: list[tuple[int, PhysicsSample | None]] = []  # failure replay's buffer
+        self._grasp = 0
         self._obj_dof = int(self.model.jnt_dofadr[self.model.joint("object").id])
-        self._frames = np.zeros((self.history, N_OBS), dtype=np.float32)
+        self._frames = np.zeros((self.observation.history, N_OBS), dtype=np.float32)
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._quat = np.zeros(4)
         self._quat0 = np.zeros(4)
@@ -424,6 +366,48 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             if physics is not None:
                 self.scaler.apply(physics)
         self._prev_action = np.zeros(ff.NU)
+
+    @property
+    def frame_skip(self) -> int:
+        """Physics substeps per policy step (``sim.frame_skip``)."""
+        return self.sim.frame_skip
+
+    @property
+    def max_setpoint_step(self) -> float:
+        """The setpoints' change per policy step at a full action [rad] (``sim``)."""
+        return self.sim.max_setpoint_step
+
+    def _turned_starts(self) -> NDArray[np.intp]:
+        """Cache indices of the start grasps whose cube is turned by at least ``TURNED``
+        (``starts.turned_prob``; none asked: empty)."""
+        if self.starts.turned_prob <= 0:
+            return np.zeros(0, dtype=np.intp)
+        q = self.physics.obj_qpos
+        quats = self.grasps.qpos[:, q + 3 : q + 7]
+        turned = np.flatnonzero([abs(cube_turn(x)) >= TURNED for x in quats])
+        if not len(turned):
+            raise FourFingerError("turned_prob: no cached start grasp has the cube turned")
+        return turned
+
+    def _build_spaces(self) -> None:
+        """The action space and the observation space with its bounds (module doc)."""
+        self.action_space = spaces.Box(-1.0, 1.0, (ff.NU,), dtype=np.float32)
+        lo = np.concatenate(
+            [np.full(ff.NQ, -np.pi), self.physics.ctrl_lo, np.tile([-0.25, -0.25, -0.25, 0.0], 8)]
+        )
+        hi = np.concatenate(
+            [np.full(ff.NQ, np.pi), self.physics.ctrl_hi, np.tile([0.25, 0.25, 0.25, MAX_FORCE], 8)]
+        )
+        self._lo, self._hi = lo.astype(np.float32), hi.astype(np.float32)
+        self._priv_hi = np.repeat(np.float32([0.25, 1.0, 20.0, 5.0]), [3, 4, 6, 5])
+        self._priv_lo = np.where(np.arange(N_PRIVILEGED) < 13, -self._priv_hi, 0.0).astype(
+            np.float32
+        )
+        history = self.observation.history
+        lo, hi = np.tile(self._lo, history), np.tile(self._hi, history)
+        if self.observation.privileged:
+            lo, hi = np.concatenate([lo, self._priv_lo]), np.concatenate([hi, self._priv_hi])
+        self.observation_space = spaces.Box(lo, hi)
 
     # -- observation ------------------------------------------------------------------------
     def observe(self) -> NDArray[np.float32]:
@@ -461,7 +445,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         """The returned observation: the last ``history`` sensed frames, oldest first (at a
         reset every slot holds the first frame); the frame itself when ``history`` is 1;
         followed by :meth:`privileged_state` with ``privileged``."""
-        if self.history == 1:
+        if self.observation.history == 1:
             out = frame
         else:
             f = self._frames
@@ -471,7 +455,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 f[:-1] = f[1:]
                 f[-1] = frame
             out = f.reshape(-1).copy()
-        return np.concatenate([out, self.privileged_state()]) if self.privileged else out
+        if self.observation.privileged:
+            return np.concatenate([out, self.privileged_state()])
+        return out
 
     def privileged_state(self) -> NDArray[np.float32]:
         """What the critic alone may see (module doc, ``privileged=True``)."""
@@ -503,10 +489,11 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         super().reset(seed=seed)
         i = None if options is None else options.get("grasp")
         replay = None
-        if i is None and self._failed and self.np_random.uniform() < self.replay_prob:
+        starts = self.starts
+        if i is None and self._failed and self.np_random.uniform() < starts.replay_prob:
             replay = self._failed.pop(int(self.np_random.integers(len(self._failed))))
             i = replay[0]
-        if i is None and self.turned_prob > 0 and self.np_random.uniform() < self.turned_prob:
+        if i is None and starts.turned_prob > 0 and self.np_random.uniform() < starts.turned_prob:
             i = int(self._turned[self.np_random.integers(len(self._turned))])
         if i is None:
             i = int(self.np_random.integers(len(self.grasps)))
@@ -522,7 +509,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         d.qpos[:] = self.grasps.qpos[i]
         d.ctrl[:] = self.grasps.ctrl[i]
         mujoco.mj_forward(m, d)
-        if self.height_from == "start":  # kept above DROP_Z for a user's own grasps
+        if self.reward.height_from == "start":  # kept above DROP_Z for a user's own grasps
             self._z_ref = max(float(self.physics.object_pos()[2]), DROP_Z + 1e-3)
         self._angle = self._twist = self._net = 0.0
         self._quat0[:] = self.physics.object_quat()
@@ -550,18 +537,19 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._net += math.remainder(twist - self._twist, 2.0 * math.pi)
         self._twist = twist
         dropped = ph.dropped()
-        if dropped and self.replay_prob > 0:
+        if dropped and self.starts.replay_prob > 0:
             self._failed.append((self._grasp, self.scaler.current if self.scaler else None))
             del self._failed[:-REPLAY_SIZE]
-        cap = self.rotation_cap
+        r = self.reward
+        cap = r.rotation_cap
         terms = {
             "rotation": rate if -cap <= rate <= cap else math.copysign(cap, rate),
-            "drop": -self.drop_weight if dropped else 0.0,
-            "action": -self.action_weight * float(a @ a) / ff.NU,
-            "height": -self.height_weight * self._sag(),
-            "slip": -self.slip_weight * ph.object_slip() if self.slip_weight else 0.0,
-            "tilt": -self.tilt_weight * z_tilt(self._quat0, ph.object_quat())
-            if self.tilt_weight
+            "drop": -r.drop_weight if dropped else 0.0,
+            "action": -r.action_weight * float(a @ a) / ff.NU,
+            "height": -r.height_weight * self._sag(),
+            "slip": -r.slip_weight * ph.object_slip() if r.slip_weight else 0.0,
+            "tilt": -r.tilt_weight * z_tilt(self._quat0, ph.object_quat())
+            if r.tilt_weight
             else 0.0,
         }
         reward = sum(terms.values())
@@ -579,18 +567,19 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             return None
         from ihm.render import make_renderer
 
+        view = self.render_settings
         if self._renderer is None:
             vis = self.model.vis
-            vis.global_.offwidth = max(vis.global_.offwidth, self.width)
-            vis.global_.offheight = max(vis.global_.offheight, self.height)
+            vis.global_.offwidth = max(vis.global_.offwidth, view.width)
+            vis.global_.offheight = max(vis.global_.offheight, view.height)
             if self.model.nlight == 0:  # the scenes have no lights: a brighter headlight
                 vis.headlight.ambient[:] = np.maximum(vis.headlight.ambient, 0.35)
                 vis.headlight.diffuse[:] = np.maximum(vis.headlight.diffuse, 0.6)
-            self._renderer = make_renderer(self.model, self.width, self.height)
+            self._renderer = make_renderer(self.model, view.width, view.height)
         cam = mujoco.MjvCamera()
         cam.lookat[:] = [0.0, 0.0, 0.06]
         cam.distance = 0.32
-        cam.azimuth, cam.elevation = (45.0, -20.0) if self.camera == "side" else (90.0, -89.0)
+        cam.azimuth, cam.elevation = (45.0, -20.0) if view.camera == "side" else (90.0, -89.0)
         self._renderer.update_scene(self.data, camera=cam)
         return self._renderer.render()
 

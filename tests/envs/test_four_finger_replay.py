@@ -99,9 +99,9 @@ def test_replay_prob_outside_unit_interval_is_refused(bad: float) -> None:
 def test_cli_replays_in_training_envs_only() -> None:
     """``--replay-prob`` reaches the training envs; validation envs never replay."""
     cfg = parse_config(["--replay-prob", "0.3"])
-    assert cfg.replay_prob == 0.3 and RotateConfig().replay_prob == 0.0
-    assert make_env(cfg)().unwrapped.replay_prob == 0.3
-    assert make_env(cfg, train=False)().unwrapped.replay_prob == 0.0
+    assert cfg.starts.replay_prob == 0.3 and RotateConfig().starts.replay_prob == 0.0
+    assert make_env(cfg)().unwrapped.starts.replay_prob == 0.3
+    assert make_env(cfg, train=False)().unwrapped.starts.replay_prob == 0.0
 
 
 @pytest.mark.parametrize("deg", [0.0, 10.0, 30.0, 44.0, 60.0, 100.0, -170.0])
@@ -148,5 +148,5 @@ def test_turned_starts_are_refused_for_round_objects_and_bad_rates() -> None:
     with pytest.raises(SystemExit):
         parse_config(["--turned-prob", "0.5"])  # the default object is the sphere
     cfg = parse_config(["--object", "cube", "--turned-prob", "0.5"])
-    assert make_env(cfg)().unwrapped.turned_prob == 0.5
-    assert make_env(cfg, train=False)().unwrapped.turned_prob == 0.0
+    assert make_env(cfg)().unwrapped.starts.turned_prob == 0.5
+    assert make_env(cfg, train=False)().unwrapped.starts.turned_prob == 0.0

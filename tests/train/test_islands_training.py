@@ -66,6 +66,7 @@ def test_ppo_smoke_run_writes_model_config_eval_and_monitor(run_dir: Path) -> No
     assert num_timesteps(run_dir / "model.zip") == 256
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["shield"] == "none" and cfg["total_steps"] == 256 and cfg["pi"] == [64, 64]
+    assert cfg["task"] == "islands"  # what --resume reads (train.trainer.run_task)
     ev = json.loads((run_dir / "eval.json").read_text())
     assert 0.0 <= ev["success_rate"] <= 1.0 and ev["stream"] == "validation"
     assert ev["episodes"] == 6 and ev["deterministic"] and ev["num_timesteps"] == 256

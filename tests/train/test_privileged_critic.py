@@ -44,6 +44,7 @@ def test_actor_ignores_the_privileged_state_and_transfer_starts_equal(tmp_path) 
     saved as ``policy.pt`` and loaded back as the same class."""
     from stable_baselines3 import PPO
 
+    from envs.four_finger import ObservationSettings
     from train.rotation import RotateConfig, build_model, make_env
     from train.runfiles import init_weights, load_actor_critic
     from train.sb3 import PrivilegedCriticPolicy
@@ -54,7 +55,7 @@ def test_actor_ignores_the_privileged_state_and_transfer_starts_equal(tmp_path) 
     src = PPO("MlpPolicy", vec, policy_kwargs={"net_arch": {"pi": [32, 32], "vf": [32, 32]}})
     src.save(tmp_path / "model.zip")
     vec.close()
-    cfg = RotateConfig(privileged_critic=True, **small)
+    cfg = RotateConfig(observation=ObservationSettings(privileged=True), **small)
     vec_p = make_vec_env([make_env(cfg)], 0)
     model = build_model(cfg, vec_p)
     assert isinstance(model.policy, PrivilegedCriticPolicy)

@@ -65,6 +65,7 @@ def test_train_ppo_with_the_qp_shield_smoke(tmp_path) -> None:
     assert "__qp__" in run_dir.name
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["shield"] == "qp" and cfg["shield_backend"] == "daqp"
+    assert cfg["task"] == "rotation" and cfg["sim"]["frame_skip"] == 25
     res = json.loads((run_dir / "eval.json").read_text())
     assert res["num_timesteps"] == 128 and 0.0 <= res["intervention_rate"] <= 1.0
 
@@ -90,8 +91,8 @@ def test_train_timestep_option_keeps_the_policy_period() -> None:
         ("four_finger_sphere", (0.002, 25)),
         ("four_finger_sphere_2.5ms", (0.0025, 20)),
     ):
-        kw = load_policy(SHIPPED.parent / name)[1]
-        assert (kw["timestep"], kw["frame_skip"]) == physics
+        sim = load_policy(SHIPPED.parent / name)[1]["sim"]
+        assert (sim.timestep, sim.frame_skip) == physics
 
 
 def test_gait_period_of_a_periodic_signal() -> None:
@@ -154,12 +155,16 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
         "--hard-prob", "0.25",
     )  # fmt: skip
     assert q.returncode == 0, q.stderr[-2000:]
-    cfg = json.loads((run_dir / "config.json").read_text())
-    assert cfg["randomize"] and cfg["corner_prob"] == 0.5 and cfg["validate_corners"] == 1
+    saved = json.loads((run_dir / "config.json").read_text())
+    assert saved["task"] == "rotation"  # config.json: the task, the env's settings in groups
+    rnd = saved["randomization"]
+    assert rnd["randomize"] and rnd["corner_prob"] == 0.5 and saved["validate_corners"] == 1
+    from train.options import from_options, from_saved
     from train.rotation import RotateConfig, parse_config, training_randomization
 
-    assert cfg["hard_prob"] == 0.25
-    r = training_randomization(RotateConfig(**{k: cfg[k] for k in ("randomize", "hard_prob")}))
+    cfg = from_saved(RotateConfig, saved)
+    assert cfg.randomization.hard_prob == 0.25 and cfg.starts.grip == "firm"
+    r = training_randomization(from_options(RotateConfig, {"randomize": True, "hard_prob": 0.25}))
     assert r is not None and (r.corner_prob, r.hard_prob) == (0.0, 0.25)
     with pytest.raises(SystemExit):
         parse_config(["--corner-prob", "0.6", "--hard-prob", "0.5"])
@@ -177,8 +182,8 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
             parse_config(["--randomize", "--range-scale", bad])
     from train.policy import load_policy
 
-    assert cfg["grip"] == "firm" and load_policy(run_dir)[1]["grip"] == "firm"
-    assert cfg["finetune_from_step"] == 128
+    assert saved["starts"]["grip"] == "firm" and load_policy(run_dir)[1]["starts"].grip == "firm"
+    assert saved["finetune_from_step"] == 128
     rows = (run_dir / "eval.csv").read_text().splitlines()
     assert "corner_drop_rate" in rows[0] and rows[-1].split(",")[-1] == "16"
     best = json.loads((run_dir / "best" / "eval.json").read_text())
@@ -188,6 +193,7 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     assert worse["drop_rate"] == max(best["drop_rate"], best["corner_drop_rate"])
     assert worse["speed_rad_s"] == min(best["speed_rad_s"], best["corner_speed_rad_s"])
 
+    from envs.four_finger import ObservationSettings
     from train.rotation import RotateConfig, build_model, make_env
     from train.runfiles import init_weights
     from train.vec import make_vec_env
@@ -207,7 +213,8 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
     # from the newest frame, and the observation statistics are tiled over the frames
     from train.runfiles import init_normalizer
 
-    cfg_h = RotateConfig(history=3, pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
+    three = ObservationSettings(history=3)
+    cfg_h = RotateConfig(observation=three, pi=[32, 32], vf=[32, 32], n_steps=64, batch_size=64)
     vec_h = init_normalizer(make_vec_env([make_env(cfg_h)], 0), run_dir)
     model_h = build_model(cfg_h, vec_h)
     init_weights(model_h, run_dir)
@@ -233,19 +240,32 @@ def test_finetune_validates_at_the_corners_and_init_from_transfers(tmp_path) -> 
 def test_finetune_moves_best_aside_when_the_validated_ranges_change(tmp_path) -> None:
     """``start_finetune``: a ``best/`` chosen at one range's corners moves to
     ``best_previous/`` when ``--range-scale`` changes (its figures are of other corners), and
-    stays when the fine-tune keeps the range (here: only ``--hard-prob`` changes)."""
+    stays when the fine-tune keeps the range (here: only ``--hard-prob`` changes). The
+    options are recorded in the layout config.json has: by name at the top of a flat file
+    (from before the groups), in their groups in a nested one."""
     import json
 
+    from train.options import from_saved, set_options, to_json
+    from train.rotation import RotateConfig
     from train.runfiles import start_finetune
 
-    run = tmp_path / "run"
-    (run / "best").mkdir(parents=True)
-    (run / "best" / "eval.json").write_text("{}")
-    (run / "config.json").write_text(json.dumps({"validate_corners": 2, "range_scale": 0.5}))
-    start_finetune(run, {"hard_prob": 0.5}, 100)
-    assert (run / "best").is_dir() and not (run / "best_previous").exists()
-    start_finetune(run, {"range_scale": 1.0}, 200)
-    assert not (run / "best").exists() and (run / "best_previous" / "eval.json").is_file()
-    cfg = json.loads((run / "config.json").read_text())
-    assert cfg["range_scale"] == 1.0 and cfg["hard_prob"] == 0.5
-    assert cfg["finetune_from_step"] == 200
+    old = {"validate_corners": 2, "range_scale": 0.5}
+    new = set_options(RotateConfig(), old)
+    for layout, text in (("flat", json.dumps(old)), ("nested", to_json(new, task="rotation"))):
+        run = tmp_path / layout
+        (run / "best").mkdir(parents=True)
+        (run / "best" / "eval.json").write_text("{}")
+        (run / "config.json").write_text(text)
+        cfg = from_saved(RotateConfig, json.loads(text))
+        cfg = set_options(cfg, {"hard_prob": 0.5})
+        start_finetune(cfg, run, ["hard_prob"], 100)
+        assert (run / "best").is_dir() and not (run / "best_previous").exists()
+        start_finetune(set_options(cfg, {"range_scale": 1.0}), run, ["range_scale"], 200)
+        assert not (run / "best").exists() and (run / "best_previous" / "eval.json").is_file()
+        saved = json.loads((run / "config.json").read_text())
+        rnd = saved if layout == "flat" else saved["randomization"]
+        assert rnd["range_scale"] == 1.0 and rnd["hard_prob"] == 0.5
+        assert saved["finetune_from_step"] == 200
+        assert ("range_scale" in saved) == (layout == "flat")
+        back = from_saved(RotateConfig, saved).randomization
+        assert (back.range_scale, back.hard_prob) == (1.0, 0.5)

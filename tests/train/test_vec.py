@@ -65,8 +65,9 @@ def test_chunked_steps_like_dummy_with_resets_and_routing(parts: int) -> None:
         assert dones >= 10  # every env finished at least two 8-step episodes
         assert b.get_attr("dt") == [0.05] * 5
         assert b.get_attr("spec", [4])[0].max_episode_steps == 8
-        b.set_attr("drop_weight", 3.0, [1, 4])
-        assert b.env_method("get_wrapper_attr", "drop_weight") == [0.0, 3.0, 0.0, 0.0, 3.0]
+        b.set_attr("object", "cube", [1, 4])
+        objects = b.env_method("get_wrapper_attr", "object")
+        assert objects == ["sphere", "cube", "sphere", "sphere", "cube"]
         assert b.env_is_wrapped(TimeLimit, [0, 3]) == [True, True]
         assert b.env_is_wrapped(Monitor) == a.env_is_wrapped(Monitor) == [False] * 5
     finally:

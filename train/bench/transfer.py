@@ -45,7 +45,7 @@ def timestep_transfer(episodes: int = 100, seconds: float = 20.0) -> list[dict[s
             rows.append(
                 {
                     "policy": name,
-                    "trained_timestep_s": kw["timestep"],
+                    "trained_timestep_s": kw["sim"].timestep,
                     "physics": label,
                     "episodes": episodes,
                     "speed_rad_s": round(r["speed_rad_s"], 3),
