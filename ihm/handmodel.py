@@ -418,7 +418,7 @@ def hand_model(
     for what in near:
         acc.warnings.append(f"joint {what}: a stop that a small motion engages is not in the "
                             "model (the grasp model is first order); pass stop_gap to include "
-                            "it")  # fmt: skip
+                            "it (grasp_from_mujoco: hand=HandOptions(stop_gap=...))")  # fmt: skip
     R = np.stack(acc.cols, axis=1) if acc.cols else np.zeros((len(ind), 0))
     _warn_motion_forces(hs, T, R, acc)
     return HandModel(

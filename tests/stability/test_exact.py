@@ -314,15 +314,15 @@ def test_a_recheck_stopped_by_the_time_limit_leaves_the_answer_uncertified(
     message says the recheck did not run (before: certified, as if confirmed)."""
     import stability.exact as exact
 
-    real, calls = exact._attempt, []
+    real, calls = exact._Run.attempt, []
 
-    def attempt(*args, **kwargs):
+    def attempt(self, *args, **kwargs):
         calls.append(1)
         if len(calls) > 1:
             raise exact.Stop("timeout", "time_limit 120 s reached")
-        return real(*args, **kwargs)
+        return real(self, *args, **kwargs)
 
-    monkeypatch.setattr(exact, "_attempt", attempt)
+    monkeypatch.setattr(exact._Run, "attempt", attempt)
     g, f, d = SEED84
     sol = solve(g, MaxDisturbance(d, commands=f, cap=100.0), method="exact")
     assert len(calls) == 2  # the first solve and the stopped recheck

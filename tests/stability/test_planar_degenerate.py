@@ -50,6 +50,7 @@ def cases():
     return out
 
 
+@pytest.mark.slow  # brute force on 120 box grasps; test_planar_naive keeps random ones
 def test_planar_agrees_with_naive_on_box_grasps():
     bad = []
     n_stable = 0
