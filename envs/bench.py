@@ -41,6 +41,7 @@ Writes ``--out``/four_finger_env.csv and four_finger_env.png.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -103,7 +104,7 @@ def make(level: int) -> FourFingerRotate:
         m.opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
     if level <= 3:
         m.opt.timestep = 0.001
-        env.frame_skip = 50
+        env.sim = dataclasses.replace(env.sim, timestep=0.001, frame_skip=50)
     if level <= 2:
         for g in range(m.ngeom):
             if m.geom_contype[g] == 2:  # finger capsules: objects only (rows 1-2)
