@@ -68,8 +68,11 @@ def test_options_are_the_old_flat_names_and_build_the_groups() -> None:
     assert cfg.observation == ObservationSettings(privileged=True)
     assert get_option(cfg, "privileged_critic") is True
     assert from_options(RotateConfig, flat(cfg)) == cfg
-    env = make_env(cfg)().unwrapped  # the groups reach the env as they are
+    # the groups reach the env as they are (the default sim and starts: the shared cache)
+    cfg = from_options(RotateConfig, {"drop_weight": 0.5, "privileged_critic": True})
+    env = make_env(cfg)().unwrapped
     assert (env.reward, env.sim, env.observation) == (cfg.reward, cfg.sim, cfg.observation)
+    assert env.reward.drop_weight == 0.5 and env.observation.privileged
     env.close()
 
 
