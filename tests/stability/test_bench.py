@@ -62,6 +62,7 @@ def test_refinement(tmp_path) -> None:
     assert float(rows[0]["value"]) == pytest.approx(float(rows[0]["full_value"]))
 
 
+@pytest.mark.slow  # modesearch and refinement on one grasp's queries, up to 60 s each
 def test_grasps(tmp_path) -> None:
     both = _run("grasps", tmp_path / "two", "--only", "a", "--directions", "1", "--wrenches",
                 "1", "--time-limit", "60")  # fmt: skip
