@@ -124,8 +124,6 @@ class _Scheme:
         stats: dict[str, Any],
     ) -> None:
         self.grasp, self.data, self.opts, self.deadline = grasp, data, opts, deadline
-        self.gamma, self.epsilon = opts.gamma, opts.epsilon
-        self.net_tol, self.max_iter = opts.net_tol, opts.max_iter
         k = 2 if grasp.planar else 3
         nw = grasp.wrench_dim
         self.weights = np.r_[np.ones(k), np.full(nw - k, 1.0 / L)]  # wrench -> force units
@@ -150,7 +148,7 @@ class _Scheme:
                             self.opts.edges, name="iterative step",
                             hand_reference=self.q_ref)  # fmt: skip
         prob.add_net_wrench(w, self.weights)
-        s = prob.add_motion_ray(r_prev, self.metric * w_prev, gamma or self.gamma)
+        s = prob.add_motion_ray(r_prev, self.metric * w_prev, gamma or self.opts.gamma)
         pt = run(prob, self.opts, self.deadline, self.stats)
         return prob, pt, (math.nan if pt is None else float(pt.x[s]))
 
@@ -171,7 +169,7 @@ class _Scheme:
         if reach <= 0.0:
             return None
         gamma = 2.0 * bounds.force / reach
-        if gamma <= self.gamma:
+        if gamma <= self.opts.gamma:
             return None
         self.stats["far_steps"] = self.stats.get("far_steps", 0) + 1
         prob, pt, s = self.step(w, bounds, r, w_net, gamma)
@@ -194,15 +192,15 @@ class _Scheme:
         scale = bounds.scale  # N: the load this loop carries
         r_prev, w_prev = r0, w
         trace: list[dict[str, float]] = []
-        while len(trace) < self.max_iter:
+        while len(trace) < self.opts.max_iter:
             prob, pt, s = self.step(w, bounds, r_prev, w_prev)
             if pt is None:
                 return "infeasible", None, None, trace
             w_k = self.grasp.G @ pt.forces.reshape(-1) + w
             net = self.norm(w_k)
             trace.append({"net": net, "step": s})
-            if self.norm(w_prev - w_k) < self.epsilon * scale:
-                if net < self.net_tol * scale:
+            if self.norm(w_prev - w_k) < self.opts.epsilon * scale:
+                if net < self.opts.net_tol * scale:
                     return "stable", prob, pt, trace
                 # The net wrench stopped changing above the tolerance. That may be a
                 # plateau, not an object pushed away: the hand follows the object at its
@@ -210,7 +208,7 @@ class _Scheme:
                 # least-motion optimum is no step at all, while an equilibrium lies beyond
                 # gamma. So look down the ray as far as a contact can move in the model
                 # (2 B) before answering "unstable"; a lower net wrench there goes on.
-                far = self.look_down_ray(w, bounds, pt.motion, w_k, net - self.epsilon * scale)
+                far = self.look_down_ray(w, bounds, pt.motion, w_k, net - self.opts.epsilon * scale)
                 if far is None:
                     return "unstable", prob, pt, trace
                 (prob, pt, s), w_k = far
