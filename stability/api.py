@@ -11,8 +11,11 @@ import math
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 from .errors import GraspError, MethodError
 from .grasp import Grasp
@@ -28,6 +31,8 @@ __all__ = [
     "MethodInfo",
     "RENAMED_METHODS",
     "DEFAULT_SPATIAL_METHOD",
+    "in_motion_unit",
+    "motion_unit",
 ]
 
 
@@ -43,6 +48,7 @@ class MethodInfo:
     hand: bool  # answers grasps with a hand model (J, R) and commands
     summary: str
     options: type[MethodOptions]  # its options, checked once by solve()
+    compliance: bool = False  # models contact and actuator stiffness and stop gaps
 
     def refuses(self, grasp: Grasp, query: Query) -> str | None:
         """Why this method cannot answer, or None when it can."""
@@ -55,6 +61,9 @@ class MethodInfo:
         has_hand = grasp.J is not None or getattr(query, "commands", None) is not None
         if has_hand and not self.hand:
             return "models a rigid hand only (no J, R or actuator commands)"
+        if grasp.compliant and not self.compliance:
+            return ("models unit contact springs and rigid transmissions only (this grasp "
+                    "has stiffness or stop gaps)")  # fmt: skip
         return None
 
 
@@ -76,14 +85,19 @@ def register(
     options: type[MethodOptions],
     hand: bool = False,
     summary: str = "",
+    compliance: bool = False,
 ) -> Callable[[Callable[..., Solution]], Callable[..., Solution]]:
     """Decorator: add a solver function ``fn(grasp, query, opts, deadline) -> Solution``
     whose options are the frozen dataclass ``options`` (:class:`MethodOptions`):
     :func:`solve` builds them from its keyword arguments and starts the
-    :class:`~stability.options.Deadline` of their ``time_limit``."""
+    :class:`~stability.options.Deadline` of their ``time_limit``. ``compliance``: the
+    method models ``Grasp.stiffness``, ``actuator_stiffness`` and ``stop_gap`` (others
+    refuse a grasp that sets them)."""
 
     def deco(fn: Callable[..., Solution]) -> Callable[..., Solution]:
-        _METHODS[name] = MethodInfo(name, fn, queries, planar, spatial, hand, summary, options)
+        _METHODS[name] = MethodInfo(
+            name, fn, queries, planar, spatial, hand, summary, options, compliance
+        )
         return fn
 
     return deco
@@ -157,9 +171,40 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
         )
     opts = info.options.of(method, options)
     t0 = time.perf_counter()
-    sol = info.fn(grasp, query, opts, opts.deadline())
+    unit = motion_unit(grasp) if info.compliance else 1.0
+    if unit == 1.0:
+        sol = info.fn(grasp, query, opts, opts.deadline())
+    else:
+        sol = info.fn(in_motion_unit(grasp, unit), query, opts, opts.deadline())
+        sol = replace(sol, grasp=grasp, motion=_times(sol.motion, 1.0 / unit),
+                      hand_motion=_times(sol.hand_motion, 1.0 / unit),
+                      hand_reference=_times(sol.hand_reference, 1.0 / unit))  # fmt: skip
     sol.stats["time_s"] = time.perf_counter() - t0
     return _answer_or_error(sol)
+
+
+def motion_unit(grasp: Grasp) -> float:
+    """The length the 3D methods measure motions in, as a stiffness ``k_u`` [N/m]: the
+    median contact stiffness (1 for the thesis' unit springs). A motion of ``1 / k_u`` m
+    loads a typical contact by 1 N, so a grasp in physical units (``k`` of 1e3-1e5 N/m,
+    motions of 1e-4 m) reaches the solvers at the scale of the unit model, where their
+    absolute tolerances (1e-9) are meant."""
+    return float(np.median(grasp.stiffness))
+
+
+def in_motion_unit(grasp: Grasp, unit: float) -> Grasp:
+    """``grasp`` with motions measured in ``1 / unit`` m: stiffness divided by ``unit``,
+    stop gaps times it. The forces of every equilibrium are the same; its motions are
+    ``unit`` times the physical ones."""
+    K, gap = (None, None) if grasp.J is None else (grasp.actuator_stiffness / unit,
+                                                   grasp.stop_gap * unit)  # fmt: skip
+    return Grasp(grasp.points, grasp.normals, grasp.mu, None if grasp.planar else grasp.tangents,
+                 grasp.J, grasp.R, grasp.backdrivable, grasp.stiffness / unit, K,
+                 gap)  # fmt: skip
+
+
+def _times(x: NDArray[np.float64] | None, factor: float) -> NDArray[np.float64] | None:
+    return None if x is None else np.asarray(x, dtype=float) * factor
 
 
 def _answer_or_error(sol: Solution) -> Solution:

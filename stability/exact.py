@@ -19,10 +19,11 @@ equality throughout: either ``c_n = 0`` (an open or unloaded contact, no frictio
 eq. mdp). SCIP handles the cones as convex and the bilinear row by spatial branching on
 ``c_t, d_t, c_n, s`` with McCormick envelopes, so every variable there needs finite
 bounds: forces from :func:`~stability.model.problem.scale_bounds` (``|c_t| <= mu B``), tangential
-motions ``|d_t| <= motion_bound * 2 B`` (the same box as ``refinement``'s edge weights),
-translations within that, rotations within it over the grasp's size ``L`` and joint
-motions within it over their lever; an answer at the box is flagged ``stats["at_bound"]``
-and, for an optimisation query, solved again in a larger box ("The box" below).
+motions ``|d_t| <= motion_bound * D`` (``D = 2 B / min k``: ``ExactBounds.displacement``;
+the same box as ``refinement``'s edge weights), translations within that, rotations
+within it over the grasp's size ``L`` and joint motions within it over their lever; an answer at the
+box is flagged ``stats["at_bound"]`` and, for an optimisation query, solved again in a larger box
+("The box" below).
 
 Queries: ``Existence``, ``MaxDisturbance`` (maximise ``s``), ``OptimalCommands`` (the
 objectives and limits of ``refinement``), all in one solve. Options: ``time_limit`` (a
@@ -134,7 +135,7 @@ class ExactOptions(MipOptions):
     """Options of ``method="exact"``: :class:`~stability.model.run.MipOptions` (``backend``
     SCIP only: the model is nonlinear; ``bound_factor`` default :data:`EXACT_BOUND_FACTOR`)
     and ``normal_uncertainty`` [rad] (each normal anywhere in a cone of that half-angle),
-    ``motion_bound`` (the motions' box per ``2 B``), ``feastol`` (SCIP's feasibility
+    ``motion_bound`` (the motions' box per ``D = 2 B / min k``), ``feastol`` (SCIP's feasibility
     tolerance), ``gap`` (SCIP's relative gap, the bracket's closing width), ``recheck`` and
     ``presolve`` (module docstring)."""
 
@@ -177,6 +178,7 @@ class ExactOptions(MipOptions):
     spatial=True,
     options=ExactOptions,
     hand=True,
+    compliance=True,
     summary="exact nonconvex problem (circular cone, bilinear maximum dissipation) solved "
     "globally by SCIP's spatial branch-and-bound: the accuracy reference for small grasps",
 )

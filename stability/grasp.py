@@ -23,6 +23,15 @@ Conventions (docs/design.md, Conventions; thesis ch. 4-5):
   transmission does (``R^T q`` free). That is how a motor without a self-locking
   gear, a saturated position servo, a passive spring's torque or a link's weight
   enters the model (``ihm.grasp_from_mujoco``).
+* Optional compliance (our extension of the thesis' model, off by default): per contact a
+  normal stiffness ``k_i > 0``, so that the spring law is ``c_n = max(0, p - k_i d_n)``
+  (the thesis' unit springs are ``k_i = 1``); per actuator a stiffness ``K_a >= 0`` and a
+  stop gap ``g_a >= 0``: its force is ``f = f_c - K v + lambda`` with ``v = R^T q`` its
+  transmission motion, ``lambda >= 0`` the reaction of a one-way stop at ``v = -g``
+  (``v >= -g``, ``lambda (v + g) = 0``). ``K = 0, g = 0`` is the thesis' nonbackdrivable
+  actuator; a backdrivable one has no stop (``lambda = 0``, ``f = f_c - K v``): a constant
+  force source when ``K = 0``, a spring (a position servo, a passive joint spring) when
+  ``K > 0``.
 
 Units: positions in metres (or any consistent length unit), forces in newtons,
 torques in newton-metres; ``mu`` is dimensionless.
@@ -35,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import GraspError
 
-__all__ = ["Grasp", "default_tangents", "cross2"]
+__all__ = ["Grasp", "actuator_compliance", "default_tangents", "cross2"]
 
 
 def cross2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -95,6 +104,17 @@ class Grasp:
         Per actuator (column of ``R``; of the identity when ``R`` is not given):
         True makes it a constant force source (``f = f_c``, transmission free);
         default all False (the thesis' nonbackdrivable actuators). Requires ``J``.
+    stiffness : float or (m,) array, optional
+        Normal stiffness ``k_i > 0`` of each contact's spring [N/m]: ``c_n = max(0, p - k_i
+        d_n)``. Default 1 (the thesis' unit virtual springs, displacements in newtons).
+    actuator_stiffness : (a,) array, optional
+        ``K_a >= 0`` per actuator [N/m or N m/rad, per unit of its transmission motion
+        ``v = R^T q``]: ``f = f_c - K v (+ lambda)``. Default 0. Requires ``J``.
+    stop_gap : (a,) array, optional
+        ``g_a >= 0`` per nonbackdrivable actuator [m or rad of ``v``]: how far its
+        transmission runs back before its one-way stop holds (``v >= -g``). Default 0 (the
+        thesis' lock at the current state); must be 0 for a backdrivable one (no stop).
+        Requires ``J``.
 
     Raises
     ------
@@ -112,6 +132,9 @@ class Grasp:
         J: ArrayLike | None = None,
         R: ArrayLike | None = None,
         backdrivable: ArrayLike | None = None,
+        stiffness: float | ArrayLike | None = None,
+        actuator_stiffness: ArrayLike | None = None,
+        stop_gap: ArrayLike | None = None,
     ) -> None:
         p = _as_finite("points", points)
         n = _as_finite("normals", normals)
@@ -179,13 +202,55 @@ class Grasp:
                 self._backdrivable = b.astype(bool)
         elif backdrivable is not None:
             raise GraspError("backdrivable given without J (hand Jacobian)")
+        self._stiffness = self._check_stiffness(stiffness)
+        self._actuator_stiffness, self._stop_gap = self._check_actuators(
+            actuator_stiffness, stop_gap
+        )
         for arr in (self._points, self._normals, self._tangents, self._mu, self._J, self._R,
-                    self._backdrivable):  # fmt: skip
+                    self._backdrivable, self._stiffness, self._actuator_stiffness,
+                    self._stop_gap):  # fmt: skip
             if arr is None:
                 continue
             arr.setflags(write=False)
         self._G = self._build_G()
         self._G.setflags(write=False)
+
+    def _check_stiffness(self, stiffness: float | ArrayLike | None) -> NDArray[np.float64]:
+        m = self._points.shape[0]
+        if stiffness is None:
+            return np.ones(m)
+        k = _as_finite("stiffness", stiffness)
+        if k.ndim == 0:
+            k = np.full(m, float(k))
+        if k.shape != (m,):
+            raise GraspError(f"stiffness must be a scalar or have shape ({m},), got {k.shape}")
+        if np.any(k <= 0):
+            raise GraspError(f"contact stiffness must be > 0 [N/m], got {k.tolist()}")
+        return k
+
+    def _check_actuators(
+        self, stiffness: ArrayLike | None, gap: ArrayLike | None
+    ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+        if self._J is None:
+            for name, val in (("actuator_stiffness", stiffness), ("stop_gap", gap)):
+                if val is not None:
+                    raise GraspError(f"{name} given without J (hand Jacobian)")
+            return None, None
+        a = self._backdrivable.size
+        out = []
+        for name, val in (("actuator_stiffness", stiffness), ("stop_gap", gap)):
+            arr = np.zeros(a) if val is None else _as_finite(name, val)
+            if arr.shape != (a,):
+                raise GraspError(f"{name} must have shape ({a},), one per actuator, got "
+                                 f"{arr.shape}")  # fmt: skip
+            if np.any(arr < 0):
+                raise GraspError(f"{name} must be >= 0, got {arr.tolist()}")
+            out.append(arr)
+        bad = np.flatnonzero(self._backdrivable & (out[1] > 0))
+        if bad.size:
+            raise GraspError(f"stop_gap at backdrivable actuator(s) {bad.tolist()}: a "
+                             "backdrivable actuator has no stop (set its gap to 0)")  # fmt: skip
+        return out[0], out[1]
 
     @staticmethod
     def _check_tangents(tangents: ArrayLike, n: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -269,6 +334,32 @@ class Grasp:
         return self._backdrivable
 
     @property
+    def stiffness(self) -> NDArray[np.float64]:
+        """(m,) normal stiffness of each contact's spring [N/m] (1: the thesis' unit springs)."""
+        return self._stiffness
+
+    @property
+    def actuator_stiffness(self) -> NDArray[np.float64] | None:
+        """(a,) stiffness ``K`` per actuator (``f = f_c - K v + lambda``); None without a hand."""
+        return self._actuator_stiffness
+
+    @property
+    def stop_gap(self) -> NDArray[np.float64] | None:
+        """(a,) how far each nonbackdrivable transmission runs back before its stop holds
+        (``v >= -g``); None without a hand."""
+        return self._stop_gap
+
+    @property
+    def compliant(self) -> bool:
+        """True when any stiffness or stop gap differs from the thesis' model (unit contact
+        springs, rigid transmissions locking where they are)."""
+        if np.any(self._stiffness != 1.0):
+            return True
+        if self._J is None:
+            return False
+        return bool(np.any(self._actuator_stiffness != 0) or np.any(self._stop_gap != 0))
+
+    @property
     def wrench_dim(self) -> int:
         """3 for planar (fx, fy, tz), 6 for spatial (f, tau)."""
         return 3 if self._dim == 2 else 6
@@ -333,3 +424,16 @@ class Grasp:
                 f"{'planar' if self.planar else 'spatial'} grasp, got {arr.shape}"
             )
         return arr
+
+
+def actuator_compliance(grasp: Grasp, na: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(K, g)``: the grasp's actuator stiffness and stop gaps over its ``na`` actuators
+    (zeros where not set: the thesis' rigid transmissions)."""
+    K = getattr(grasp, "actuator_stiffness", None)
+    g = getattr(grasp, "stop_gap", None)
+    K = np.zeros(na) if K is None else np.asarray(K, dtype=float)
+    g = np.zeros(na) if g is None else np.asarray(g, dtype=float)
+    if K.shape != (na,) or g.shape != (na,):
+        raise GraspError(f"actuator_stiffness/stop_gap have {K.size}/{g.size} entries for "
+                         f"{na} actuators")  # fmt: skip
+    return K, g

@@ -225,6 +225,7 @@ class GwsOptions(MethodOptions):
     spatial=True,
     options=GwsOptions,
     hand=False,
+    compliance=True,  # its answer ignores every spring, unit or not
     summary=(
         "grasp wrench space baseline (Ferrari-Canny): balancing forces exist in the "
         "friction cones; ignores preload, compliance and maximum dissipation"

@@ -22,7 +22,7 @@ A stop above ``net_tol`` is first checked down the ray (``stats["far_steps"]``,
 the object at its commanded forces so the net wrench is the same all along the ray, and the
 least-motion optimum is then no step at all (step 0, "converged") while an equilibrium lies
 beyond ``gamma`` times the small net wrench. One step with the ray as long as a contact can
-move in the model (``2 B``) decides: a lower net wrench there and the loop goes on from it,
+move in the model (``2 B / min k``) decides: a lower net wrench there and the loop goes on from it,
 else "unstable". Commanded preloads of random grasps stall on such plateaus, so without the
 look their queries would be answered "unstable" where ``exact`` holds the commands.
 
@@ -43,11 +43,12 @@ can hold the cap where ``s = 0`` is unstable), nor does the scheme's stop prove 
 unstable, so "unstable" for every ``s`` would be a guess. An ``Existence`` query answers
 "unstable" there (the scheme's own answer).
 
-Units and the metric ``M``: springs have unit stiffness, so motion is measured in newtons.
+Units and the metric ``M``: the thesis' springs have unit stiffness, so motion is measured in
+newtons (with contact stiffness ``k``, ``Grasp.stiffness``, motions are divided by ``min k``).
 The thesis moves the object along ``w^{k-1}`` itself, which mixes N and N m; here the
-rotation part is divided by ``L^2`` (``M = diag(1, 1, 1, L^2, L^2, L^2)``: a torque ``tau``
-turns a grasp of size ``L`` by about ``tau / L^2``), and ``L = 1`` gives the thesis' scheme
-exactly (option ``length_scale``). ``s = 1`` fully loads a single spring; each step picks
+rotation part is divided by ``L^2`` (``M = diag(1, 1, 1, L^2, L^2, L^2) min k``: a torque
+``tau`` turns a grasp of size ``L`` by about ``tau / L^2``), and ``L = 1`` gives the thesis'
+scheme exactly (option ``length_scale``). ``s = 1`` fully loads a single spring; each step picks
 the best ``s`` on its ray, so ``gamma`` (default 10) only caps how far: on ``barrett_box``
 ``gamma = 1`` needs 83 steps where 10 needs 19, for the same answers. Model bounds
 (:func:`~stability.model.problem.scale_bounds`) follow each applied wrench, so a bisection probe at
@@ -127,7 +128,9 @@ class _Scheme:
         k = 2 if grasp.planar else 3
         nw = grasp.wrench_dim
         self.weights = np.r_[np.ones(k), np.full(nw - k, 1.0 / L)]  # wrench -> force units
-        self.metric = np.r_[np.ones(k), np.full(nw - k, 1.0 / L**2)]  # wrench -> motion
+        # wrench -> motion: a force w moves the softest contact's spring by w / min k
+        soft = 1.0 / float(grasp.stiffness.min())
+        self.metric = np.r_[np.ones(k), np.full(nw - k, 1.0 / L**2)] * soft
         self.stats = stats
         self.q_ref: NDArray[np.float64] | None = None  # where the actuators lock
 
@@ -161,14 +164,14 @@ class _Scheme:
         below: float,
     ) -> tuple[tuple[ExactProblem, ExactPoint, float], NDArray[np.float64]] | None:
         """One step from ``r`` along the net wrench ``w_net`` with the ray as long as a contact
-        can move in the model (``2 B``, not ``gamma``); the step and its net wrench when that
-        is below ``below``, else None. ``stats["far_steps"]`` counts the looks, and
+        can move in the model (``bounds.displacement``, not ``gamma``); the step and its net
+        wrench when that is below ``below``, else None. ``stats["far_steps"]`` counts the looks, and
         ``stats["far_moves"]`` those that found a lower net wrench."""
         direction = self.metric * w_net
         reach = float(np.abs(self.grasp.G.T @ direction).max(initial=0.0))
         if reach <= 0.0:
             return None
-        gamma = 2.0 * bounds.force / reach
+        gamma = bounds.displacement / reach
         if gamma <= self.opts.gamma:
             return None
         self.stats["far_steps"] = self.stats.get("far_steps", 0) + 1
@@ -207,7 +210,8 @@ class _Scheme:
                 # commanded forces, the net wrench is the same all along the ray, and the
                 # least-motion optimum is no step at all, while an equilibrium lies beyond
                 # gamma. So look down the ray as far as a contact can move in the model
-                # (2 B) before answering "unstable"; a lower net wrench there goes on.
+                # (bounds.displacement) before answering "unstable"; a lower net wrench
+                # there goes on.
                 far = self.look_down_ray(w, bounds, pt.motion, w_k, net - self.opts.epsilon * scale)
                 if far is None:
                     return "unstable", prob, pt, trace
@@ -224,6 +228,7 @@ class _Scheme:
     spatial=True,
     options=IterativeOptions,
     hand=True,
+    compliance=True,
     summary="thesis ch. 5: movement-constrained MIP steps along the net wrench (no guarantee)",
 )
 def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, opts: IterativeOptions,

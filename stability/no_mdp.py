@@ -39,6 +39,7 @@ __all__: list[str] = []
     spatial=True,
     options=MipOptions,
     hand=True,
+    compliance=True,
     summary="thesis ch. 5 baseline: one MIP, friction cone without maximum dissipation "
     "(wrong where a virtual rotation wedges the object)",
 )

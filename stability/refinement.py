@@ -126,7 +126,7 @@ class RefinementOptions(MipOptions):
     8 edges per contact at level 1), ``levels`` (``q``: the finest level, ``4 2^q``
     equivalent edges), ``refine`` (refine the needed sectors; False: uniform edges at
     ``start_level``), ``normal_uncertainty`` [rad], ``max_rounds``, ``motion_bound`` (the
-    tangential motion bound per edge weight, times ``2 B``), ``start_level`` (uniform edges
+    tangential motion bound per edge weight, times ``2 B / min k``), ``start_level`` (uniform edges
     of this level first; default 1, ``levels + 1`` without refinement), ``certify`` (try
     each round's answer as an exact solution), ``certify_gap`` (stop when the certified
     value meets the relaxation's bound within this, relative)."""
@@ -199,7 +199,7 @@ class _Relaxation:
         if data.max_normal_force is not None:
             for j in prob.c[:, 0]:
                 M.ub[j] = min(M.ub[j], data.max_normal_force)
-        A = motion_bound * 2.0 * B
+        A = motion_bound * bounds.displacement
         self.A = A
         Gt = prob.G.T.reshape(grasp.m, 3, -1)
         Jt = None if prob.J is None else prob.J.reshape(grasp.m, 3, -1)
@@ -244,7 +244,7 @@ class _Relaxation:
                 val = np.array([v * math.cos(eta) if j in cols else v
                                 for j, v in zip(row.idx, row.val, strict=True)])  # fmt: skip
                 idx = np.r_[row.idx, self.alpha[i]]
-                val = np.r_[val, np.full(len(self.alpha[i]), math.sin(eta))]
+                val = np.r_[val, np.full(len(self.alpha[i]), math.sin(eta) * grasp.stiffness[i])]
                 M.rows[r] = Row(idx.astype(np.int64), val, row.lo, row.hi, row.name)
 
     def refine(self, pt: ExactPoint, tol: float = 1e-9, exact: ExactPoint | None = None,
@@ -618,6 +618,7 @@ def _answer(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: 
     spatial=True,
     options=RefinementOptions,
     hand=True,
+    compliance=True,
     summary="thesis ch. 6: Coulomb friction with maximum dissipation, hierarchical refinement "
     "of a convex relaxation (infeasible at any level = unstable)",
 )
@@ -625,10 +626,9 @@ def _solve_refinement(grasp: Grasp, query: Any, opts: RefinementOptions,
                       deadline: Deadline) -> Solution:  # fmt: skip
     # An exact point beyond the relaxation's bound means the model's box (force and motion
     # bounds, bound_factor times the force scale) cut the optimum off: it grows tenfold.
-    # The default box, 1e3 times the force scale: sliding and joint motions that load no
-    # spring are virtual and can be large, so a small box can cut the optimum off; a large
-    # one weakens the MIPs' relaxations (the measurements behind 1e3:
-    # docs/notebook/2026-11-28-exact-rechecks.md, "refinement's box").
+    # The default box, 1e3 times the force scale: motions that load no spring are virtual
+    # and can be large, so a small box can cut the optimum off; a large one weakens the MIPs'
+    # relaxations (docs/notebook/2026-11-28-exact-rechecks.md, "refinement's box").
     cuts: list[str] = []
 
     def attempt(factor: float, prev: Solution | None) -> tuple[Solution | None, str | None]:

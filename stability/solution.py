@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .grasp import Grasp
+from .grasp import Grasp, actuator_compliance
 from .queries import Existence, MaxDisturbance, Query
 
 __all__ = [
@@ -45,8 +45,9 @@ def model_residuals(
     * ``equilibrium``: ``max |G c + w|`` [N, N m].
     * ``normal_sign``: ``max(0, -c_n)``.
     * ``friction_cone``: ``max(0, |c_t| - mu c_n)``.
-    * ``spring_law`` (needs ``motion``): ``max |c_n - max(0, p - d_n)|`` with
-      ``d = G^T r - J q`` (thesis eq. normal_compliance).
+    * ``spring_law`` (needs ``motion``): ``max |c_n - max(0, p - k d_n)|`` with
+      ``d = G^T r - J q`` and ``k`` the contact stiffness (thesis eq. normal_compliance;
+      ``k = 1`` there).
     * ``max_dissipation`` (needs ``motion``): ``max(c_t . d_t + mu c_n |d_t|)``,
       zero iff friction opposes sliding at full magnitude (thesis eq. cone);
       non-negative whenever the cone holds. A product [N x motion]: a small slide hides a
@@ -68,16 +69,21 @@ def model_residuals(
     to 0):
 
     * ``hand_equilibrium``: ``max |J^T c - R f|`` [N m or N per joint].
-    * ``actuator_command``: ``max(0, f_c - f)``: an actuator never gives less than its
-      command; ``|f - f_c|`` for a backdrivable one (``Grasp.backdrivable``: a constant
-      force source). The two conditions below skip backdrivable actuators.
-    * ``nonbackdrivable`` (needs ``hand_motion`` ``q``): ``max(0, -v)`` with transmission
-      motion ``v = R^T (q - q_ref)``: no transmission runs backwards. ``q_ref``
-      (``hand_reference``) is where the actuators lock, 0 unless the method applied a
-      commanded preload first (``iterative``).
-    * ``actuator_complementarity`` (needs ``q``): ``max min(f - f_c, v)`` over the
-      actuators where both are >= 0: an actuator that moves gives exactly its command; one
-      loaded beyond its command is locked. Transmission motion is virtual, like ``r``.
+    * ``actuator_command``: ``max(0, -lambda)`` with ``lambda = f - f_c + K v`` the stop's
+      reaction (``K`` the actuator stiffness, 0 in the thesis, ``v`` as below, taken 0
+      without ``q``): an actuator never gives less than its command (less its spring's
+      relief); ``|lambda|`` for a backdrivable one (``Grasp.backdrivable``: a constant
+      force source or a spring, no stop). The two conditions below skip backdrivable
+      actuators.
+    * ``nonbackdrivable`` (needs ``hand_motion`` ``q``): ``max(0, -(v + g))`` with
+      transmission motion ``v = R^T (q - q_ref)`` and ``g`` the stop gap (0 in the
+      thesis): no transmission runs back past its stop. ``q_ref`` (``hand_reference``) is
+      where the actuators lock, 0 unless the method applied a commanded preload first
+      (``iterative``).
+    * ``actuator_complementarity`` (needs ``q``): ``max min(lambda, v + g)`` over the
+      actuators where both are >= 0: an actuator off its stop gives exactly its command
+      less its spring; one loaded beyond that rests on its stop. Transmission motion is
+      virtual, like ``r``.
     """
     k = grasp.dim
     c = np.asarray(forces, dtype=float).reshape(grasp.m, k)
@@ -92,7 +98,7 @@ def model_residuals(
         d = grasp.contact_motion(motion, hand_motion)
         dn, dt = d[:, 0], d[:, 1:]
         p = np.zeros(grasp.m) if preload is None else preload
-        res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - dn))))
+        res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - grasp.stiffness * dn))))
         diss = np.einsum("ij,ij->i", ct, dt) + grasp.mu * cn * np.linalg.norm(dt, axis=1)
         res["max_dissipation"] = float(np.max(np.abs(diss)))
         res["slide_alignment"] = slide_alignment(grasp.mu, c, d)
@@ -102,16 +108,21 @@ def model_residuals(
         fc = np.zeros(R.shape[1]) if commands is None else np.asarray(commands, dtype=float)
         back = getattr(grasp, "backdrivable", None)
         back = np.zeros(R.shape[1], dtype=bool) if back is None else np.asarray(back, bool)
+        K, gap = actuator_compliance(grasp, R.shape[1])
         res["hand_equilibrium"] = float(np.max(np.abs(grasp.J.T @ c.reshape(-1) - R @ f)))
-        short = np.where(back, np.abs(f - fc), np.maximum(0.0, fc - f))
-        res["actuator_command"] = float(np.max(short, initial=0.0))
+        v = np.zeros(R.shape[1])
         if hand_motion is not None:
             q = np.asarray(hand_motion, dtype=float)
             if hand_reference is not None:
                 q = q - np.asarray(hand_reference, dtype=float)
-            v = np.where(back, 0.0, R.T @ q)  # a backdrivable transmission moves freely
-            res["nonbackdrivable"] = float(np.max(np.maximum(0.0, -v), initial=0.0)) + 0.0
-            both = np.minimum(np.maximum(f - fc, 0.0), np.maximum(v, 0.0))
+            v = R.T @ q
+        lam = f - fc + K * v  # the stop's reaction
+        short = np.where(back, np.abs(lam), np.maximum(0.0, -lam))
+        res["actuator_command"] = float(np.max(short, initial=0.0))
+        if hand_motion is not None:
+            w = np.where(back, 0.0, v + gap)  # a backdrivable transmission moves freely
+            res["nonbackdrivable"] = float(np.max(np.maximum(0.0, -w), initial=0.0)) + 0.0
+            both = np.minimum(np.maximum(lam, 0.0), np.maximum(w, 0.0))
             res["actuator_complementarity"] = float(np.max(both, initial=0.0))
     return res
 
@@ -236,8 +247,9 @@ class Solution:
         Contact forces on the object in contact frames, ``[c_n, c_t]`` planar,
         ``[c_n, c_t1, c_t2]`` spatial [N].
     motion : array or None
-        Object motion ``r`` (planar ``(x, y, theta)``); virtual, since springs
-        have unit stiffness. None where the method has no motion (``gws``).
+        Object motion ``r`` (planar ``(x, y, theta)``); virtual with the thesis' unit
+        springs (in newtons), in metres and radians with physical ``Grasp.stiffness``.
+        None where the method has no motion (``gws``).
     value : float or None
         Optimisation queries: the optimum (MaxDisturbance: largest ``s``); set on every
         stable answer, None on an unstable one (no ``s`` in ``[0, cap]`` holds; no

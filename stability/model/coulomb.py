@@ -60,11 +60,11 @@ class CoulombModel:
         prob = ExactProblem(grasp, data.preload, data.hand, bounds, friction=False,
                             name="exact", command_range=data.command_range)  # fmt: skip
         self.prob = prob
-        M, m, B = prob.model, grasp.m, bounds.force
+        M, m = prob.model, grasp.m
         if data.max_normal_force is not None:
             for j in prob.c[:, 0]:
                 M.ub[j] = min(M.ub[j], data.max_normal_force)
-        D = self.D = motion_bound * 2.0 * B
+        D = self.D = motion_bound * bounds.displacement
         self.dt = M.add_vars(2 * m, -D, D, "C", "dt").reshape(m, 2)
         self.slide = M.add_vars(m, 0.0, math.sqrt(2.0) * D, "C", "slide")
         # the motions in the same box: translations D, rotations D / L, joints D / |J_j|
@@ -97,7 +97,8 @@ class CoulombModel:
                 val = np.array([v * math.cos(eta) if j in cols else v
                                 for j, v in zip(row.idx, row.val, strict=True)])  # fmt: skip
                 M.rows[r] = Row(np.r_[row.idx, self.slide[i]].astype(np.int64),
-                                np.r_[val, math.sin(eta)], row.lo, row.hi, row.name)  # fmt: skip
+                                np.r_[val, grasp.stiffness[i] * math.sin(eta)], row.lo, row.hi,
+                                row.name)  # fmt: skip
 
     def scip_model(
         self, time_limit: float | None, verbose: bool, feastol: float, gap: float

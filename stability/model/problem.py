@@ -10,17 +10,26 @@ displacement is measured in newtons):
 
 * ``r`` object motion (``(x, y, theta)`` planar, ``(v, omega)`` spatial), free;
 * ``c`` contact forces in contact frames, ``c_n in [0, B]``, ``|c_t| <= mu B``;
-* ``u`` separation beyond the preload, ``u = c_n + d_n - p in [0, B]`` with
-  ``d = G^T r - J q`` (eq. rel_contact_motion);
+* ``u`` separation beyond the preload, ``u = c_n + k d_n - p in [0, B]`` with
+  ``d = G^T r - J q`` (eq. rel_contact_motion) and ``k`` the contact's stiffness
+  (``Grasp.stiffness``, 1 in the thesis);
 * ``y`` per contact (eq. binary_contact): ``y = 1`` (closed) ``=> u = 0``, so
-  ``c_n = p - d_n >= 0``; ``y = 0`` (open) ``=> c_n = 0``, so ``d_n >= p``. Together:
-  ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance with preload ``p``);
+  ``c_n = p - k d_n >= 0``; ``y = 0`` (open) ``=> c_n = 0``, so ``k d_n >= p``. Together:
+  ``c_n = max(0, p - k d_n)`` (thesis eq. normal_compliance with preload ``p``);
 * hands (``J`` given; ``R`` defaults to the identity): joint motion ``q`` (free),
   actuator forces ``f in [f_c, f_c + E]``, transmission motion ``v = R^T (q - q_ref) in
   [0, V]`` (eq. underac_nonbackdrive; ``q_ref = 0`` unless a preload state is given),
   hand equilibrium ``J^T c = R f`` (eqs. hand_eq and torqueRatio in the sign convention
   of docs/design.md: ``c`` acts on the object, ``-c`` on the hand), and per actuator (eq.
   binary_actuator) ``z = 1`` (locked) ``=> v = 0``, ``z = 0`` (moving) ``=> f = f_c``.
+* compliant actuators (our extension; ``Grasp.actuator_stiffness`` ``K`` and
+  ``Grasp.stop_gap`` ``g``): the physical force is ``f_c - K v_p + lambda`` with ``v_p =
+  R^T (q - q_ref)`` and a stop reaction ``lambda >= 0`` at ``v_p = -g``. The variables are
+  shifted so that the thesis' rows above hold unchanged: ``v = v_p + g`` (the distance
+  from the stop, in ``[0, V + g]``) and ``f = f_c + lambda`` (``f - f_c`` the stop's
+  reaction); only hand equilibrium gains the spring, ``J^T c = R (f - K (v - g))``.
+  ``K = 0, g = 0`` is the thesis' model exactly; a backdrivable actuator has ``f = f_c``
+  and a free ``v = v_p``. :attr:`ExactPoint.actuator_forces` is the physical force.
 
 The bounds ``B, V, E`` are not arbitrary big-M constants: :func:`scale_bounds` derives
 them from the query's own force scale (the largest applied force or torque / size,
@@ -46,7 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import GraspError
-from ..grasp import Grasp
+from ..grasp import Grasp, actuator_compliance
 from ..mip import INF, MipModel
 
 __all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "clean_wrench",
@@ -103,12 +112,15 @@ def actuator_vector(
 class ExactBounds:
     """Model bounds [N, or the transmission's units]: ``force`` ``B`` on normal forces and
     on separations beyond the preload; ``motion`` ``V`` per actuator on ``R^T q``;
-    ``excess`` ``E`` per actuator on ``f - f_c``; ``scale`` the force scale they came from."""
+    ``excess`` ``E`` per actuator on ``f - f_c``; ``scale`` the force scale they came from;
+    ``displacement`` the most a contact moves, ``2 B / min k`` [m] (``2 B`` with unit
+    springs), the unit of the motions' box."""
 
     force: float
     motion: NDArray[np.float64]
     excess: NDArray[np.float64]
     scale: float
+    displacement: float
 
 
 def scale_bounds(
@@ -124,8 +136,10 @@ def scale_bounds(
     ``wrench_max`` the largest wrench the query applies (``cap * direction`` for
     MaxDisturbance) and ``|J_j|`` the norm of joint ``j``'s column (the contact force that
     balances the commanded torque through that joint's lever). ``B = bound_factor * S``
-    (``S = 1`` N when nothing loads the grasp); contacts then move by at most ``2 B``, so
-    ``V_l = sum_j |R_jl| 2 B / min_j |J_j|``, and ``E = |R^+| |J^T| B (1 + max mu) sqrt(m)``.
+    (``S = 1`` N when nothing loads the grasp); contacts then move by at most ``D = 2 B /
+    min k`` (``k`` the contact stiffness), so ``V_l = sum_j |R_jl| D / min_j |J_j| + g_l``
+    (``g`` the stop gaps), and ``E = |R^+| |J^T| B (1 + max mu) sqrt(m) + K (V + g)`` (``K``
+    the actuator stiffness).
     The motions ``r`` and ``q`` stay unbounded (no indicator row holds them): each answer is
     the least virtual motion among the optimal ones (:meth:`ExactProblem.tidy`).
     """
@@ -144,16 +158,21 @@ def scale_bounds(
     if S <= 0.0:
         S = 1.0
     B = bound_factor * S
+    D = 2.0 * B / float(grasp.stiffness.min())
     if hand is None:
-        return ExactBounds(B, np.zeros(0), np.zeros(0), S)
+        return ExactBounds(B, np.zeros(0), np.zeros(0), S, D)
     lever = float(cols[live].min()) if np.any(live) else 1.0
-    motion = np.abs(R).sum(axis=0) * 2.0 * B / lever
-    motion = np.where(motion > 0, motion, 2.0 * B / lever)
+    motion = np.abs(R).sum(axis=0) * D / lever
+    motion = np.where(motion > 0, motion, D / lever)
     c_norm = B * (1.0 + float(grasp.mu.max())) * math.sqrt(grasp.m)
     jt = float(np.linalg.norm(grasp.J, 2))
     rp = float(np.linalg.norm(np.linalg.pinv(R), 2)) if R.size else 0.0
     excess = np.full(R.shape[1], max(rp * jt * c_norm, B))
-    return ExactBounds(B, motion, excess, S)
+    K, gap = actuator_compliance(grasp, R.shape[1])
+    if np.any(gap) or np.any(K):
+        motion = motion + gap
+        excess = excess + K * motion
+    return ExactBounds(B, motion, excess, S, D)
 
 
 CLEAN_RTOL = 1e-7
@@ -269,6 +288,7 @@ class ExactProblem:
         self.u = M.add_vars(m, 0.0, B, "C", "u")
         self.y = M.add_vars(m, 0, 1, "B", "y")
         self.q = self.f = self.v = self.z = self.hand_reference = self.fc = None
+        self.stiffness = self.gap = None
         self.spring_rows: list[int] = []
         self.G = _clean(g.G)  # (wrench_dim, k m), round-off entries zeroed
         Gt = self.G.T.reshape(m, k, -1)
@@ -295,12 +315,13 @@ class ExactProblem:
                                 "C", "v")  # fmt: skip
             # z: locked (1) or moving (0); a backdrivable actuator always "moves" (z = 0)
             self.z = M.add_vars(na, 0, np.where(back, 0, 1), "B", "z")
+        kc = g.stiffness
         for i in range(m):
-            # c_n + d_n - u = p, d_n = G_n^T r - J_n q
+            # c_n + k d_n - u = p, d_n = G_n^T r - J_n q
             idx, val = [self.c[i, 0], self.u[i]], [1.0, -1.0]
-            idx, val = self.extend(idx, val, self.r, Gt[i, 0])
+            idx, val = self.extend(idx, val, self.r, kc[i] * Gt[i, 0])
             if Jn is not None:
-                idx, val = self.extend(idx, val, self.q, -Jn[i])
+                idx, val = self.extend(idx, val, self.q, -kc[i] * Jn[i])
             self.spring_rows.append(M.add_constraint(idx, val, "==", float(preload[i]),
                                                      f"spring{i}"))  # fmt: skip
             M.add_indicator(self.y[i], [self.u[i]], [1.0], "<=", 0.0, 1, f"closed{i}")
@@ -309,15 +330,17 @@ class ExactProblem:
             self._friction_polygon()
         if hand is not None:
             R, fc = hand
-            for j in range(R.shape[0]):  # J^T c - R f = 0
+            K, gap = self.stiffness, self.gap = actuator_compliance(grasp, R.shape[1])
+            for j in range(R.shape[0]):  # J^T c - R f + R K v = R K g
                 idx, val = self.extend([], [], self.c.reshape(-1), self.J[:, j])
                 idx, val = self.extend(idx, val, self.f, -R[j])
-                M.add_constraint(idx, val, "==", 0.0, f"hand{j}")
+                idx, val = self.extend(idx, val, self.v, R[j] * K)
+                M.add_constraint(idx, val, "==", float(R[j] @ (K * gap)), f"hand{j}")
             ref = np.zeros(R.shape[1]) if hand_reference is None else R.T @ hand_reference
             self.hand_reference = hand_reference
-            for a in range(R.shape[1]):  # R^T q - v = R^T q_ref
+            for a in range(R.shape[1]):  # R^T q - v = R^T q_ref - g
                 idx, val = self.extend([self.v[a]], [-1.0], self.q, R[:, a])
-                M.add_constraint(idx, val, "==", float(ref[a]), f"transmission{a}")
+                M.add_constraint(idx, val, "==", float(ref[a] - gap[a]), f"transmission{a}")
                 if back[a]:
                     continue  # f = f_c by its bounds, v free: no lock
                 M.add_indicator(self.z[a], [self.v[a]], [1.0], "<=", 0.0, 1, f"locked{a}")
@@ -467,9 +490,10 @@ class ExactProblem:
         if self.hand is not None:
             q, f, z = x[self.q], x[self.f], np.round(x[self.z]) == 1
             fc = self.hand[1] if self.fc is None else x[self.fc]
+            at = at or bool(np.any(f - fc >= 0.99 * self.bounds.excess))
+            f = f - self.stiffness * (x[self.v] - self.gap)  # the physical force
             moved = np.where(self.backdrivable, 0.0, x[self.v])  # a free transmission: no bound
             at = at or bool(np.any(moved >= 0.99 * self.bounds.motion))
-            at = at or bool(np.any(f - fc >= 0.99 * self.bounds.excess))
         return ExactPoint(c, x[self.r], q, f, np.round(x[self.y]) == 1, z, at, x)
 
     def states(self, pt: ExactPoint, tol: float = 1e-9) -> NDArray[np.str_]:

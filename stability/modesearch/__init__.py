@@ -47,7 +47,7 @@ still cannot be certified.
 The box (``bound_factor``, default :data:`MODESEARCH_BOUND_FACTOR` times the query's force
 scale): forces and separations ``B``, transmission motions ``V``, excess actuator forces
 ``E`` (:func:`~stability.model.problem.scale_bounds`) and the motions ``r``, ``q``, ``d_t``
-(``motion_bound * 2 B``, as ``exact``). The bound holds for exact points inside it; an
+(``motion_bound * 2 B / min k``, as ``exact``). The bound holds for exact points inside it; an
 exact point beyond the bound, or one at the box, grows it tenfold and the query is solved
 again, at most :data:`~stability.options.BOX_RETRIES` times
 (:func:`~stability.options.enlarge_box`). An answer at the box has no proven bound
@@ -302,6 +302,7 @@ def _answer(grasp: Grasp, query: Any, stats: dict[str, Any], ex: CoulombModel,
     spatial=True,
     options=ModeSearchOptions,
     hand=True,
+    compliance=True,
     summary="Coulomb friction with maximum dissipation by one branch-and-bound tree over "
     "contact modes and slide arcs, one LP per node (exact points, proven brackets)",
 )
