@@ -55,6 +55,14 @@ contacts of one hand body and object body with normals within 1e-3 rad.
   it, and the hand check may refuse the grasp).
 
 The effect of each reduction on the answers is measured in ``docs/linkage.md``.
+
+Compliance: ``compliance="unit"`` (default) is the thesis' model, unit virtual springs at
+the contacts and rigid actuators and stops; ``compliance="mujoco"`` gives the grasp
+MuJoCo's own stiffness in physical units (``Grasp(stiffness=, actuator_stiffness=,
+stop_gap=)``): each contact the normal stiffness of the MuJoCo contacts it stands for
+(:mod:`ihm.compliance`, summed as :mod:`ihm.patches` says), servos and springs their
+stiffness, limits near the state their gaps. What each MJCF element becomes under either
+mode: the table in :mod:`ihm.compliance`.
 """
 
 from __future__ import annotations
@@ -69,7 +77,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
+from .compliance import contact_stiffness
 from .handmodel import (
+    NEAR_LIMIT,
     HandElement,
     HandModel,
     HandModelError,
@@ -104,13 +114,16 @@ class HandOptions:
     stop_gap : a joint limit this close [rad or m] that carries no force yet is a stop too
     spring_held : a passive motion held by springs alone raises :class:`HandModelError`
         (``"raise"``) or is modelled with the springs as constant torques and a warning
-        (``"warn"``)
+        (``"warn"``); not used with ``compliance="mujoco"`` (the springs' stiffness holds)
+    near_limit : with ``compliance="mujoco"``, a joint limit within ``max(stop_gap,
+        near_limit)`` [rad or m] of engaging is a stop with that distance as its gap
     """
 
     backdrivable: bool | tuple[str, ...] | None = None
     servo: str = "nonbackdrivable"
     stop_gap: float = 0.0
     spring_held: str = "raise"
+    near_limit: float = NEAR_LIMIT
 
 
 @dataclass(frozen=True)
@@ -364,9 +377,10 @@ def contact_frame_force(
 
 
 def _read(
-    model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_]
+    model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_], stiffness: bool
 ) -> list[ContactGroup]:
-    """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`);
+    """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`), with
+    its normal stiffness (:func:`ihm.compliance.contact_stiffness`) if ``stiffness``;
     :class:`GraspError` for a contact with torsional or rolling friction."""
     out = []
     for i, hand_geom, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
@@ -381,8 +395,9 @@ def _read(
         obj_geom = con.geom1 if obj_first else con.geom2
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
+        k = float(contact_stiffness(model, data, [i])[0]) if stiffness else 0.0
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
-                                frame, frame.T @ force, mu, [i]))  # fmt: skip
+                                frame, frame.T @ force, mu, [i], k))  # fmt: skip
     return out
 
 
@@ -396,6 +411,7 @@ def grasp_from_mujoco(
     patch_points: int = 3,
     hand: HandOptions | None = None,
     hand_rtol: float = 0.02,
+    compliance: str = "unit",
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
 
@@ -416,7 +432,9 @@ def grasp_from_mujoco(
     reaction) is checked: ``grasp.hand_residual`` is ``max |J^T c - R f|`` over the
     joints divided by the largest joint torque ``max |J^T c|``; above ``hand_rtol`` it
     raises, naming what the model leaves out. Unmodelled elements warn
-    (:class:`HandModelWarning`).
+    (:class:`HandModelWarning`). ``compliance``: ``"unit"`` (default; the thesis' unit
+    springs, rigid actuators and stops) or ``"mujoco"`` (MuJoCo's contact, servo and
+    spring stiffness and the limits' gaps in physical units: module docstring).
 
     Raises
     ------
@@ -436,13 +454,16 @@ def grasp_from_mujoco(
         raise GraspError(f"patch_points must be an integer >= 1, got {patch_points!r}")
     if not (np.isfinite(hand_rtol) and hand_rtol > 0):
         raise GraspError(f"hand_rtol must be a finite number > 0, got {hand_rtol!r}")
+    if compliance not in ("unit", "mujoco"):
+        raise GraspError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
+    mj = compliance == "mujoco"
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
     hand_joints(model, in_obj)  # a ball or free joint in the hand: refused before anything
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
-    groups = merge_contacts(_read(model, data, in_obj), merge_tol)
+    groups = merge_contacts(_read(model, data, in_obj, mj), merge_tol)
     if not groups:
         raise GraspError(
             f"no active contact between body {object_body!r} and the hand "
@@ -453,7 +474,8 @@ def grasp_from_mujoco(
 
     ho = HandOptions() if hand is None else hand
     hm = hand_model(model, data, in_obj, backdrivable=ho.backdrivable, servo=ho.servo,
-                    stop_gap=ho.stop_gap, spring_held=ho.spring_held,
+                    stop_gap=ho.stop_gap, spring_held=ho.spring_held, compliance=compliance,
+                    near_limit=ho.near_limit,
                     object_contacts=[i for g in groups for i in g.ids])  # fmt: skip
     pts_w = np.array([np.mean(g.pos, axis=0) for g in groups])
     frames_w = np.array([g.frame for g in groups])  # (m, 3, 3) rows n, t1, t2
@@ -483,6 +505,8 @@ def grasp_from_mujoco(
         object_pos=x_o,
         object_mat=R_o,
     )
+    physical = (dict(stiffness=[g.stiffness for g in groups], actuator_stiffness=hm.stiffness,
+                     stop_gap=hm.gaps) if mj else {})  # fmt: skip
     return SceneGrasp(
         points=pts_o,
         normals=frames_o[:, 0],
@@ -492,6 +516,7 @@ def grasp_from_mujoco(
         R=hm.R,
         backdrivable=hm.backdrivable,
         source=source,
+        **physical,
     )
 
 

@@ -47,6 +47,15 @@ model has:
 
 Every element that enters the model is listed in :attr:`HandModel.elements`.
 
+**Compliance** (``compliance="mujoco"``; the table in :mod:`ihm.compliance`): the columns
+carry MuJoCo's stiffness and stop gaps, :attr:`HandModel.stiffness` ``K`` and
+:attr:`HandModel.gaps` ``g`` (the grasp model's ``f = f_c - K v + lambda``, ``v >= -g``):
+an actuator whose force depends on its length (an unsaturated servo) is a backdrivable
+spring of stiffness ``K = -dF/dL`` (``servo`` is not used); passive springs get their
+stiffness and a motion held by springs alone is no longer refused; joint limits within
+``max(stop_gap, near_limit)`` of engaging become stops with that distance as gap.
+``compliance="unit"`` (default) is the model above, ``K = g = 0``.
+
 This module holds :func:`hand_model` and :class:`HandModel`, the reading of the hand's joints
 and constraint rows at the state, the folding of the equalities into ``T`` and the checks
 and warnings on what stays out of the model; the elements and the columns of ``R``
@@ -62,6 +71,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from .compliance import actuator_stiffness
 from .handparts import (
     FORCE_ATOL,
     Columns,
@@ -105,6 +115,9 @@ class HandModel:
     backdrivable : (a,) constant force sources
     elements : every column and folded equality (:attr:`names`: the columns')
     warnings : elements the model leaves out (their torques stay in the residual)
+    stiffness : (a,) ``K`` per column [N/m or N m/rad of its motion ``v = col^T q``]
+    gaps : (a,) stop gap ``g`` per column [m or rad of ``v``]; both 0 with
+        ``compliance="unit"``
     """
 
     dofs: NDArray[np.int64]
@@ -117,6 +130,8 @@ class HandModel:
     backdrivable: NDArray[np.bool_]
     elements: list[HandElement] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    stiffness: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    gaps: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     @property
     def names(self) -> list[str]:
@@ -210,8 +225,10 @@ def _fold(
     return T, dep
 
 
-def _check_modes(servo: str, spring_held: str) -> None:
-    """:class:`HandModelError` for an unknown ``spring_held`` or ``servo`` mode."""
+def _check_modes(servo: str, spring_held: str, compliance: str) -> None:
+    """:class:`HandModelError` for an unknown ``spring_held``, ``servo`` or ``compliance``."""
+    if compliance not in ("unit", "mujoco"):
+        raise HandModelError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
     if spring_held not in ("raise", "warn"):
         raise HandModelError(f"spring_held must be 'raise' or 'warn', got {spring_held!r}")
     if servo not in ("nonbackdrivable", "force"):
@@ -383,6 +400,8 @@ def hand_model(
     object_contacts: Iterable[int] = (),
     stop_gap: float = 0.0,
     spring_held: str = "raise",
+    compliance: str = "unit",
+    near_limit: float = NEAR_LIMIT,
 ) -> HandModel:
     """The hand's coordinates, transmission, stops and constant torques (module doc).
 
@@ -395,13 +414,16 @@ def hand_model(
     carries no force yet is a stop too (engaged by a motion of at most ``stop_gap``).
     ``spring_held``: a passive motion held by springs alone (no actuator, no loaded stop
     takes part in it) raises :class:`HandModelError` (``"raise"``, default) or is modelled
-    with the springs as constant torques and a warning (``"warn"``).
+    with the springs as constant torques and a warning (``"warn"``). ``compliance``:
+    ``"unit"`` (default) or ``"mujoco"`` (module docstring, Compliance: servo and spring
+    stiffness, stops within ``max(stop_gap, near_limit)`` [rad or m] with their gaps).
 
     The steps: fold the equalities into ``T``; then the columns of ``R`` in order:
     actuators, loaded stops, stops within ``stop_gap``, constant torques; then the
     warnings for what stays out of the model.
     """
-    _check_modes(servo, spring_held)
+    _check_modes(servo, spring_held, compliance)
+    mj = compliance == "mujoco"
     hs = _hand_state(model, data, in_obj)
     acc = Columns()
     T, dep = _fold_equalities(hs, acc.elements)
@@ -409,12 +431,14 @@ def hand_model(
     if hs.joints and not ind:
         acc.warnings.append(f"the hand's equality constraints lock all {len(hs.joints)} joints: "
                             "the hand is a rigid fixture in the model")  # fmt: skip
-    add_actuators(hs, T, backdrivable, servo, acc)
+    add_actuators(hs, T, backdrivable, servo, acc,
+                  actuator_stiffness(model, data) if mj else None)  # fmt: skip
     add_active_stops(hs, T, acc)
-    near = add_gap_stops(hs, T, stop_gap, acc)
-    add_constant_torques(hs, T, acc)
+    near = add_gap_stops(hs, T, stop_gap, acc, near_limit if mj else None)
+    add_constant_torques(hs, T, acc, spring_stiffness=mj)
     _warn_unmodelled(hs, object_contacts, acc.warnings)
-    _check_spring_held(acc, T.shape[1], spring_held)
+    if not mj:  # with compliance="mujoco" the springs' stiffness holds their motions
+        _check_spring_held(acc, T.shape[1], spring_held)
     for what in near:
         acc.warnings.append(f"joint {what}: a stop that a small motion engages is not in the "
                             "model (the grasp model is first order); pass stop_gap to include "
@@ -432,6 +456,8 @@ def hand_model(
         backdrivable=np.array(acc.back, dtype=bool),
         elements=acc.elements,
         warnings=acc.warnings,
+        stiffness=np.array(acc.stiff, dtype=float),
+        gaps=np.array(acc.gap, dtype=float),
     )
 
 

@@ -12,6 +12,10 @@ coordinates ``q`` (``qdot[dofs] = T q``).
   passive reaction), :func:`add_gap_stops` (a stop per limit within ``stop_gap``) and
   :func:`add_constant_torques` (backdrivable columns for springs, weight and applied
   forces at the state). :mod:`ihm.handmodel`'s docstring states the model they implement.
+
+With ``compliance="mujoco"`` (:mod:`ihm.compliance`) the columns also carry a stiffness
+``K`` [per unit of the column's motion ``v = col^T q``] and a stop gap ``g`` [of ``v``]:
+servos their ``-dF/dL``, springs their stiffness, limits near the state their distance.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from stability import GraspError
+
+from .compliance import limit_gaps, passive_stiffness
 
 __all__ = [
     "FORCE_ATOL",
@@ -99,9 +105,10 @@ class HandState:
 @dataclass
 class Columns:
     """The columns of ``R`` as :func:`ihm.handmodel.hand_model` collects them: each column
-    with its command ``f_c``, its actual force ``f_act`` [N or N m] and whether it is
-    backdrivable; ``elements`` lists every column and folded equality, ``warnings`` what
-    stays out."""
+    with its command ``f_c``, its actual force ``f_act`` [N or N m], whether it is
+    backdrivable, its stiffness ``K`` and stop gap ``g`` (0 but with
+    ``compliance="mujoco"``); ``elements`` lists every column and folded equality,
+    ``warnings`` what stays out."""
 
     cols: list[NDArray[np.float64]] = field(default_factory=list)
     f_c: list[float] = field(default_factory=list)
@@ -109,15 +116,19 @@ class Columns:
     back: list[bool] = field(default_factory=list)
     elements: list[HandElement] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    stiff: list[float] = field(default_factory=list)
+    gap: list[float] = field(default_factory=list)
 
     def add(self, col: NDArray[np.float64], command: float, force: float, backdrivable: bool,
-            element: HandElement) -> None:  # fmt: skip
+            element: HandElement, stiffness: float = 0.0, gap: float = 0.0) -> None:  # fmt: skip
         """Append one column of ``R`` and its element."""
         self.cols.append(col)
         self.f_c.append(command)
         self.f_act.append(force)
         self.back.append(backdrivable)
         self.elements.append(element)
+        self.stiff.append(stiffness)
+        self.gap.append(gap)
 
 
 def column_elements(elements: list[HandElement]) -> list[HandElement]:
@@ -132,10 +143,11 @@ def object_name(model: mujoco.MjModel, obj: mujoco.mjtObj, i: int) -> str:
 
 
 def _actuator_mode(
-    hs: HandState, a: int, backdrivable: bool | set[str] | None, servo: str
+    hs: HandState, a: int, backdrivable: bool | set[str] | None, servo: str, spring: bool
 ) -> tuple[bool, str]:
     """Whether actuator ``a`` is backdrivable, and why (:mod:`ihm.handmodel` docstring,
-    Actuators)."""
+    Actuators); ``spring``: its force depends on its length (``compliance="mujoco"``, an
+    unsaturated servo): a backdrivable spring."""
     model = hs.model
     force = float(hs.data.actuator_force[a])
     lo, hi = model.actuator_forcerange[a]
@@ -144,8 +156,9 @@ def _actuator_mode(
     is_servo = (int(model.actuator_biastype[a]) == int(mujoco.mjtBias.mjBIAS_AFFINE)
                 and model.actuator_biasprm[a, 1] < 0)  # fmt: skip
     if backdrivable is None:
-        b = saturated or (is_servo and servo == "force")
+        b = saturated or spring or (is_servo and servo == "force")
         why = ("saturated at its forcerange: a constant force source" if saturated else
+               "a spring, K = -dF/dL (compliance='mujoco')" if spring else
                "position servo (servo='force')" if b else
                "position servo, modelled nonbackdrivable (servo='nonbackdrivable')"
                if is_servo else "motor (the thesis' nonbackdrivable transmission)")  # fmt: skip
@@ -161,9 +174,14 @@ def add_actuators(
     backdrivable: bool | Iterable[str] | None,
     servo: str,
     acc: Columns,
+    stiffness: NDArray[np.float64] | None = None,
 ) -> None:
     """One column ``T^T moment`` per actuator, its force as command; an unknown name in
-    ``backdrivable`` raises :class:`HandModelError`."""
+    ``backdrivable`` raises :class:`HandModelError`. ``stiffness``: ``K = -dF/dL`` per
+    actuator (:func:`ihm.compliance.actuator_stiffness`; ``compliance="mujoco"``), in the
+    column's units (``v = col^T q`` is the actuator length's change); an actuator with
+    ``K > 0`` is backdrivable unless ``backdrivable`` names it otherwise, and ``K < 0``
+    raises :class:`HandModelError`."""
     names = hs.actuator_names
     mode = (backdrivable if backdrivable is None or isinstance(backdrivable, bool)
             else set(backdrivable))  # fmt: skip
@@ -174,10 +192,15 @@ def add_actuators(
                                  f"actuators: {names}")  # fmt: skip
     for a in range(hs.model.nu):
         force = float(hs.data.actuator_force[a])
-        b, why = _actuator_mode(hs, a, mode, servo)
+        k = 0.0 if stiffness is None else float(stiffness[a])
+        if k < 0:
+            raise HandModelError(f"actuator {names[a]}: dF/dL = {-k:.3g} > 0 (positive "
+                                 "feedback): not a stiffness the grasp model has")  # fmt: skip
+        b, why = _actuator_mode(hs, a, mode, servo, k > 0)
+        note = f"{why}; K {k:.4g}" if stiffness is not None else why
         acc.add(T.T @ hs.Mh[a], force, force, b,
                 HandElement(names[a], "actuator", "backdrivable" if b else "nonbackdrivable",
-                            force, force, why))  # fmt: skip
+                            force, force, note), stiffness=k)  # fmt: skip
 
 
 def _merge_into_actuator(
@@ -222,31 +245,43 @@ def add_active_stops(hs: HandState, T: NDArray[np.float64], acc: Columns) -> Non
 
 
 def add_gap_stops(
-    hs: HandState, T: NDArray[np.float64], stop_gap: float, acc: Columns
+    hs: HandState,
+    T: NDArray[np.float64],
+    stop_gap: float,
+    acc: Columns,
+    near_limit: float | None = None,
 ) -> list[str]:
     """A stop (command 0, no force yet) per joint limit within ``stop_gap`` [rad or m] that
     no nonbackdrivable column blocks already; returns the joints within
-    :data:`NEAR_LIMIT` of a limit that got none (for a warning)."""
+    :data:`NEAR_LIMIT` of a limit that got none (for a warning). ``near_limit``
+    (``compliance="mujoco"``): stops for the limits within ``max(stop_gap, near_limit)``
+    of engaging (:func:`ihm.compliance.limit_gaps`: ``dist - margin``), each with that
+    distance as its gap ``g`` (0 where inside the margin); None: gap 0 (the thesis' lock)."""
     model, data, typ, frc = hs.model, hs.data, hs.typ, hs.frc
     active_joints = {int(hs.eid[r]) for r in np.flatnonzero(typ == int(_C.mjCNSTR_LIMIT_JOINT))
                      if frc[r] > FORCE_ATOL}  # fmt: skip
+    within = stop_gap if near_limit is None else max(stop_gap, near_limit)
     near: list[str] = []
     for k, j in enumerate(hs.joints):
         if not model.jnt_limited[j] or j in active_joints:
             continue
         q = float(data.qpos[model.jnt_qposadr[j]])
         lo, hi = model.jnt_range[j]
-        for bound, sign in ((lo, 1.0), (hi, -1.0)):
+        engage = limit_gaps(model, data, [j])[0]
+        for bound, sign, g in ((lo, 1.0, engage[0]), (hi, -1.0, engage[1])):
             gap = sign * (q - bound)  # >= 0 inside the range
             col = T.T @ (sign * np.eye(len(hs.joints))[k])
             if np.linalg.norm(col) == 0 or _blocked(col, acc.cols, acc.back):
                 continue  # locked by the equalities, or a nonbackdrivable column holds it
-            if gap <= stop_gap:
-                note = f"within stop_gap: {gap:.3g} from its limit"
+            dist = gap if near_limit is None else float(g)
+            if dist <= within:
+                g_stop = 0.0 if near_limit is None else max(0.0, float(g))
+                note = (f"within stop_gap: {gap:.3g} from its limit" if near_limit is None else
+                        f"within {within:g} of engaging: gap {g_stop:.3g}")  # fmt: skip
                 acc.add(col, 0.0, 0.0, False,
                         HandElement(f"limit:{hs.jname[k]}", "stop", "nonbackdrivable", 0.0,
-                                    0.0, note))  # fmt: skip
-            elif gap <= NEAR_LIMIT:
+                                    0.0, note), gap=g_stop)  # fmt: skip
+            elif dist <= NEAR_LIMIT:
                 near.append(f"{hs.jname[k]} ({gap:.3g} from its limit)")
     return near
 
@@ -268,12 +303,46 @@ def _add_constant(
     acc.add(tau / size, size, size, True, HandElement(name, kind, "backdrivable", size, size, note))
 
 
-def add_constant_torques(hs: HandState, T: NDArray[np.float64], acc: Columns) -> None:
+def _add_springs(hs: HandState, T: NDArray[np.float64], acc: Columns) -> None:
+    """``compliance="mujoco"``: one backdrivable column per hand joint with a passive
+    spring (a torque at the state or a stiffness), ``col = T^T e_k / |T^T e_k|`` (signed
+    along the spring's torque), command ``|T^T e_k| s_k``, stiffness ``K = K_kk |T^T
+    e_k|^2`` with ``K_kk`` the joint's own ``-d qfrc_spring / d q`` (the column's motion
+    is ``v = dq_k / |T^T e_k|``). Off-diagonal passive stiffness (a tendon spring spanning
+    several joints) is not represented: named in the warnings."""
+    spring = np.asarray(hs.data.qfrc_spring)[hs.dofs]
+    K = passive_stiffness(hs.model, hs.data, hs.dofs) if hs.dofs.size else np.zeros((0, 0))
+    diag = np.diag(K).copy()
+    off = np.abs(K - np.diag(diag)).max(initial=0.0)
+    if off > 1e-6 * max(1.0, float(np.abs(diag).max(initial=0.0))):
+        acc.warnings.append(f"passive stiffness coupling the hand joints (tendon springs, "
+                            f"up to {off:.3g}): only each joint's own is modelled")  # fmt: skip
+    for k in np.flatnonzero((np.abs(spring) > FORCE_ATOL) | (diag > FORCE_ATOL)):
+        tk = T.T @ np.eye(len(hs.joints))[k]
+        n = float(np.linalg.norm(tk))
+        if n == 0:
+            continue  # a joint the equalities lock
+        sign = -1.0 if spring[k] < -FORCE_ATOL else 1.0
+        size = n * abs(float(spring[k]))
+        K_a = max(0.0, float(diag[k])) * n**2
+        acc.add(sign * tk / n, size, size, True,
+                HandElement(f"spring:{hs.jname[k]}", "spring", "backdrivable", size, size,
+                            f"its torque at the state; stiffness K {K_a:.4g}"),
+                stiffness=K_a)  # fmt: skip
+
+
+def add_constant_torques(
+    hs: HandState, T: NDArray[np.float64], acc: Columns, spring_stiffness: bool = False
+) -> None:
     """Passive springs (one column per joint), the links' weight at rest, ``qfrc_applied``
-    and ``xfrc_applied`` on hand bodies, as constant torques at the state."""
+    and ``xfrc_applied`` on hand bodies, as constant torques at the state;
+    ``spring_stiffness`` (``compliance="mujoco"``): the springs with their stiffness
+    (:func:`_add_springs`)."""
     model, data, dofs = hs.model, hs.data, hs.dofs
     spring = np.asarray(data.qfrc_spring)[dofs]
-    for k in np.flatnonzero(np.abs(spring) > FORCE_ATOL):
+    if spring_stiffness:
+        _add_springs(hs, T, acc)
+    for k in np.flatnonzero(np.abs(spring) > FORCE_ATOL) if not spring_stiffness else []:
         e = np.zeros(len(hs.joints))
         e[k] = spring[k]
         _add_constant(acc, T, e, f"spring:{hs.jname[k]}", "spring",

@@ -5,6 +5,18 @@ reduces a face contact reported as many points to two (``keep == 0``: the line t
 its centre of pressure) or to at most ``keep`` points that carry its wrench. What each
 does, and the conventions (world frame, ``n`` into the object, forces of the hand on the
 object): the module docstring of :mod:`ihm.contacts`, which calls them.
+
+Normal stiffness (``ContactGroup.stiffness`` [N/m], ``compliance="mujoco"``): the MuJoCo
+contacts a group stands for are springs in parallel, each projected on the group's normal
+``n`` (a spring ``k_i`` along ``n_i`` gives ``k_i (n_i . n)^2`` along ``n``), so merging
+sums them. ``reduce="extremes"`` adds a dropped contact's stiffness to the kept point its
+force goes to (the patch's total stiffness is kept). ``reduce="line"`` splits the
+patch's total ``K = sum k_i`` between the two ends ``s_lo < s_hi`` on the line by the
+lever rule, ``k_hi = K (s_bar - s_lo) / (s_hi - s_lo)`` with ``s_bar = sum k_i s_i / K``
+the patch's centre of stiffness along the line (``s_i``: each point's coordinate on it),
+so that the total and the first moment along the line are kept; each end keeps at least
+1 % of ``K`` (the spring law needs ``k > 0``) where the centre of stiffness lies outside
+the ends.
 """
 
 from __future__ import annotations
@@ -23,7 +35,9 @@ class ContactGroup:
     (world frame). ``pair``: (hand geom, object geom) of the first; ``bodies``: (hand body,
     object body); ``pos``: the merged contacts' positions [m]; ``frame``: rows n, t1, t2,
     ``n`` into the object; ``force_world``: the summed force of the hand on the object
-    [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices."""
+    [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices;
+    ``stiffness``: the normal stiffness of the springs it stands for [N/m] (module
+    docstring; 0 where not computed)."""
 
     pair: tuple[int, int]
     bodies: tuple[int, int]
@@ -32,6 +46,7 @@ class ContactGroup:
     force_world: NDArray[np.float64]
     mu: float
     ids: list[int]
+    stiffness: float = 0.0
 
 
 def merge_contacts(contacts: list[ContactGroup], merge_tol: float) -> list[ContactGroup]:
@@ -51,6 +66,7 @@ def merge_contacts(contacts: list[ContactGroup], merge_tol: float) -> list[Conta
                 g.force_world += c.force_world
                 g.ids.append(c.ids[0])
                 g.mu = min(g.mu, c.mu)
+                g.stiffness += c.stiffness * float(g.frame[0] @ c.frame[0]) ** 2
                 break
         else:
             groups.append(c)
@@ -143,8 +159,21 @@ def _line_patch(p: list[ContactGroup]) -> list[ContactGroup] | None:
     f = f0 + np.linalg.pinv(A) @ (W - A @ f0)
     ids = [i for g in p for i in g.ids]
     mu = min(g.mu for g in p)
+    k_ends = _lever_split(np.array([g.stiffness for g in p]), along, s_lo, s_hi)
     return [replace(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
-                    force_world=f[3 * k : 3 * k + 3]) for k in range(2)]  # fmt: skip
+                    force_world=f[3 * k : 3 * k + 3], stiffness=k_ends[k])
+            for k in range(2)]  # fmt: skip
+
+
+def _lever_split(k: NDArray[np.float64], s: NDArray[np.float64], s_lo: float,
+                 s_hi: float) -> tuple[float, float]:  # fmt: skip
+    """The total ``K = sum k`` split between ends at ``s_lo < s_hi`` so that the first moment
+    ``sum k s`` is kept, each end keeping at least 1 % of ``K`` (module docstring)."""
+    total = float(k.sum())
+    if total <= 0 or s_hi <= s_lo:
+        return total / 2, total / 2
+    w = float(np.clip((float(k @ s) / total - s_lo) / (s_hi - s_lo), 0.01, 0.99))
+    return total * (1 - w), total * w
 
 
 def reduce_patches(groups: list[ContactGroup], keep: int) -> list[ContactGroup]:
@@ -190,6 +219,7 @@ def reduce_patches(groups: list[ContactGroup], keep: int) -> list[ContactGroup]:
             near.force_world = near.force_world + g.force_world
             near.ids = near.ids + g.ids
             near.mu = min(near.mu, g.mu)
+            near.stiffness += g.stiffness * float(near.frame[0] @ g.frame[0]) ** 2
         # keep the patch's wrench: f = f0 + A^+ (W - A f0), A the kept points' wrench map
         centre = pts.mean(axis=0)
         W = _patch_wrench(pts, np.array([g.force_world for g in p]), centre)
