@@ -8,9 +8,17 @@ Examples::
     python -m ihm show barrett_box --preload 0.3 0.3 0.3 0
     python -m ihm map barrett_box --plane xy --workers 2 --nonbackdrivable
     python -m ihm batch barrett_box box.jsonl --directions 36   # for python -m stability.batch
+    python -m ihm show my/gripper.xml --object parcel   # your own MJCF file, its free body
+    python -m ihm map my/gripper.xml --object parcel --method sim modesearch --plane xz
 
-Errors (unknown scene, wrong preload length, a grasp that does not settle,
-no OpenGL context) print one line to stderr and exit with status 2.
+SCENE is one of our scenes' names (``python -m ihm list``) or an MJCF file's path (it ends
+in ``.xml`` or holds a ``/``); ``--object`` names the grasped free body (default
+``object``). Without ``--preload`` a scene settles with its ``ihm_preload`` forces, else
+with its ``init`` keyframe's controls (zeros without a keyframe; :mod:`ihm.scenes`).
+
+Errors (unknown scene or file, a file MuJoCo cannot compile, no such free body, wrong
+preload length, a grasp that does not settle, no OpenGL context) print one line to
+stderr and exit with status 2.
 """
 
 from __future__ import annotations
@@ -67,6 +75,14 @@ def _add_list(sub: Any) -> None:
     )
 
 
+def _add_scene(cmd: argparse.ArgumentParser) -> None:
+    """The SCENE argument (a name or a file's path) and ``--object``, the grasped body."""
+    cmd.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list') or "
+                     "the path of an MJCF file (ends in .xml or holds a /)")  # fmt: skip
+    cmd.add_argument("--object", dest="object_body", default="object", metavar="BODY",
+                     help="the grasped free body (default: object)")  # fmt: skip
+
+
 def _add_show(sub: Any) -> None:
     """The ``show`` subcommand: a scene, the commands it settles with, the PNG and .rrd."""
     show = sub.add_parser(
@@ -79,12 +95,12 @@ def _add_show(sub: Any) -> None:
         "contact points (yellow) and force arrows (red, from the point along the force of "
         "the hand on the object), and optionally a rerun recording.",
     )
-    show.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    _add_scene(show)
     show.add_argument(
         "--out",
         type=Path,
         metavar="PATH.png",
-        help=f"PNG to write (default: {OUT_DIR}/SCENE.png)",
+        help=f"PNG to write (default: {OUT_DIR}/SCENE.png; a file's stem for a path)",
     )
     show.add_argument(
         "--rrd", type=Path, metavar="PATH.rrd", help="also write a rerun recording to this file"
@@ -95,7 +111,8 @@ def _add_show(sub: Any) -> None:
         nargs="+",
         metavar="F",
         help="commanded actuator forces, one per actuator, in each actuator's unit "
-        "(N m for joint motors, N for tendons); default: the scene's ihm_preload",
+        "(N m for joint motors, N for tendons); default: the scene's ihm_preload, else its "
+        "init keyframe's controls",
     )
     show.add_argument("--width", type=int, default=640, help="image width [px] (default 640)")
     show.add_argument("--height", type=int, default=480, help="image height [px] (default 480)")
@@ -126,7 +143,7 @@ def _add_map(sub: Any) -> None:
         "--method and --preload sets are overlaid on one chart. Writes OUT/SCENE_PLANE.csv "
         "and .png.",
     )
-    mp_.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    _add_scene(mp_)
     mp_.add_argument("--plane", default="xy", help="two force axes, e.g. xy, xz, yz (default xy)")
     mp_.add_argument(
         "--method",
@@ -152,7 +169,7 @@ def _add_map(sub: Any) -> None:
         action="append",
         metavar="F",
         help="commanded actuator forces (one per actuator); repeat for several maps; "
-        "default: the scene's ihm_preload",
+        "default: the scene's ihm_preload, else its init keyframe's controls",
     )
     mp_.add_argument(
         "--nonbackdrivable",
@@ -193,7 +210,7 @@ def _add_batch(sub: Any) -> None:
         "resistible-force map (the queries of 'map --method M') to OUT, for "
         "'python -m stability.batch OUT RESULTS' (local processes or a Ray cluster).",
     )
-    bt.add_argument("scene", metavar="SCENE", help="scene name (see 'python -m ihm list')")
+    _add_scene(bt)
     bt.add_argument("out", type=Path, help="query file to write (JSON lines)")
     bt.add_argument("--plane", default="xy", help="two force axes (default xy)")
     bt.add_argument("--directions", type=int, default=36, help="directions (default 36)")
@@ -241,10 +258,11 @@ def contact_table(model: mujoco.MjModel, grasp: SceneGrasp) -> str:
 def _cmd_show(args: argparse.Namespace) -> int:
     from .render import render_png  # after MUJOCO_GL is set (it is, at the top)
 
-    loaded = scenes.load_scene(args.scene, preload=args.preload)
+    loaded = scenes.load_scene(args.scene, preload=args.preload, object_body=args.object_body)
     model, data, info = loaded.model, loaded.data, loaded.settle_info
-    grasp = grasp_from_mujoco(model, data)
-    print(f"scene {args.scene}: {scenes.scene_about(args.scene)}")
+    grasp = grasp_from_mujoco(model, data, args.object_body)
+    about = scenes.scene_about(args.scene)
+    print(f"scene {args.scene}" + (f": {about}" if about else ""))
     if info is not None:
         print(
             f"settled in {info.time_s:.3f} s simulated ({info.wall_s:.2f} s wall, {info.steps} "
@@ -261,7 +279,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         f"equilibrium residuals: object max|G c + w_g| = {res['object']:.3g} [N, N m], "
         f"hand max|J^T c - R f| = {res['hand']:.3g} [N m]"
     )
-    out = args.out if args.out is not None else OUT_DIR / f"{args.scene}.png"
+    out = args.out if args.out is not None else OUT_DIR / f"{scenes.scene_label(args.scene)}.png"
     png = render_png(
         model,
         data,
@@ -304,7 +322,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
             raise MapError("--seat needs --nonbackdrivable (it ratchets the seated grasp)")
         spec = MapSpec(args.scene, args.plane, args.directions, seat=args.seat,
                        nonbackdrivable=args.nonbackdrivable, frame=args.frame,
-                       cap=args.cap)  # fmt: skip
+                       cap=args.cap, object_body=args.object_body)  # fmt: skip
         csv_path, png, walls, agree = run(
             spec, preloads, args.out, methods=args.method, workers=args.workers,
             progress=not args.no_progress, ray=args.ray, **opts,
@@ -348,7 +366,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             spec = MapSpec(args.scene, args.plane, args.directions, preload=args.preload,
                            nonbackdrivable=args.nonbackdrivable, frame=args.frame,
-                           cap=args.cap)  # fmt: skip
+                           cap=args.cap, object_body=args.object_body)  # fmt: skip
             rows = scene_map_rows(spec, method=args.method)
             n = write_rows(args.out, rows)
         except (MapError, GraspError, OSError) as exc:

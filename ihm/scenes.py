@@ -1,17 +1,19 @@
-"""Grasp scenes of the thesis: load an MJCF scene and settle the grasp.
+"""Grasp scenes: load an MJCF scene and settle the grasp.
 
-A scene is one file ``assets/scenes/<name>.xml`` that includes a hand model
-and adds the grasped object. Everything :func:`load_scene` needs is in that
-file, so that adding a scene is adding a file:
+A scene is one file ``assets/scenes/<name>.xml`` (the thesis' scenes, by name) or any
+MJCF file given by its path (:func:`is_scene_file`); it includes a hand model and adds
+the grasped object. Everything :func:`load_scene` needs is in that file, so that adding
+a scene is adding a file:
 
-* a body named ``object`` with a free joint (also named ``object``);
-* a keyframe named ``init``: the hand slightly open around the object;
-* ``<custom><numeric name="ihm_preload" data="..."/></custom>``: the default
-  commanded actuator forces, one per actuator, in the actuator's own unit
-  (N m for a joint motor, N for a tendon);
-* ``<custom><text name="ihm_hand" data="..."/></custom>``: the hand's name;
-* optionally ``<custom><text name="ihm_about" data="..."/></custom>``: one
-  line saying which grasp of the thesis the scene is.
+* a free body (default name ``object``, ``load_scene``'s ``object_body``): the object;
+* optionally a keyframe named ``init``: the hand slightly open around the object
+  (without one the scene starts from the model's default pose, ``qpos0``);
+* optionally ``<custom><numeric name="ihm_preload" data="..."/></custom>``: the default
+  commanded actuator forces, one per actuator, in the actuator's own unit (N m for a
+  joint motor, N for a tendon); without it the scene settles with the ``init`` keyframe's
+  controls ``ctrl`` (zeros without a keyframe) held, as MuJoCo would simulate the file;
+* ``<custom><text name="ihm_hand" data="..."/></custom>``: the hand's name (our scenes);
+* optionally ``<custom><text name="ihm_about" data="..."/></custom>``: what grasp it is.
 
 Settling (:func:`settle`) is documented there; it ends when every velocity of
 the model is below ``vtol`` for ``hold_s`` seconds of simulated time (both fields of
@@ -30,10 +32,19 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from stability import GraspError
-
 from .contacts import body_subtree
 from .ratchet import Ratchet, actuated_joints, actuated_tendons
+from .scene_files import (
+    SceneError,
+    as_forces,
+    check_free_body,
+    custom_text,
+    default_preload,
+    is_scene_file,
+    scene_label,
+    seat_forces,
+    start_commands,
+)
 
 __all__ = [
     "SCENES_DIR",
@@ -42,8 +53,11 @@ __all__ = [
     "SettleInfo",
     "SettleOptions",
     "available_scenes",
+    "default_preload",
+    "is_scene_file",
     "load_scene",
     "scene_about",
+    "scene_label",
     "scene_path",
     "settle",
     "transmission_ratchet",
@@ -52,53 +66,30 @@ __all__ = [
 SCENES_DIR = Path(__file__).resolve().parent.parent / "assets" / "scenes"
 
 
-class SceneError(GraspError):
-    """Unknown scene, a malformed scene file, or a grasp that does not settle."""
-
-
 def available_scenes() -> list[str]:
     """Names of the scenes in ``assets/scenes`` (file stems), sorted."""
     return sorted(p.stem for p in SCENES_DIR.glob("*.xml"))
 
 
 def scene_path(name: str) -> Path:
-    """Path of scene ``name``; :class:`SceneError` listing the known scenes if unknown."""
+    """Path of scene ``name``: the file itself, absolute, when ``name`` is a path
+    (:func:`is_scene_file`), else ``assets/scenes/<name>.xml``; :class:`SceneError` for a
+    missing file or an unknown name (listing the known scenes)."""
+    if is_scene_file(name):
+        path = Path(name).expanduser()
+        if not path.is_file():
+            raise SceneError(f"scene file {name!r} not found")
+        return path.resolve()
     known = available_scenes()
     if name not in known:
         raise SceneError(f"unknown scene {name!r}; known scenes: {', '.join(known) or '(none)'}")
     return SCENES_DIR / f"{name}.xml"
 
 
-def _custom_numeric(model: mujoco.MjModel, name: str) -> NDArray[np.float64] | None:
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
-    if i < 0:
-        return None
-    adr, size = model.numeric_adr[i], model.numeric_size[i]
-    return np.array(model.numeric_data[adr : adr + size], dtype=float)
-
-
-def _custom_text(model: mujoco.MjModel, name: str) -> str | None:
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, name)
-    if i < 0:
-        return None
-    adr, size = model.text_adr[i], model.text_size[i]
-    return bytes(model.text_data[adr : adr + size]).split(b"\0", 1)[0].decode()
-
-
 def scene_about(name: str) -> str:
     """The one-line description stored in the scene file (``ihm_about``)."""
     model = mujoco.MjModel.from_xml_path(str(scene_path(name)))
-    return _custom_text(model, "ihm_about") or ""
-
-
-def default_preload(model: mujoco.MjModel) -> NDArray[np.float64]:
-    """The scene's default commanded actuator forces (``ihm_preload``), shape (nu,)."""
-    f = _custom_numeric(model, "ihm_preload")
-    if f is None:
-        raise SceneError("scene has no <numeric name='ihm_preload'> (default actuator forces)")
-    if f.shape != (model.nu,):
-        raise SceneError(f"ihm_preload has {f.size} values for {model.nu} actuators")
-    return f
+    return custom_text(model, "ihm_about") or ""
 
 
 @dataclass
@@ -134,24 +125,20 @@ class SettleInfo:
 @dataclass(frozen=True)
 class LoadedScene:
     """What :func:`load_scene` returns: the compiled ``model``, its ``data`` at rest, the
-    ``settle_info`` of the settle that brought it there (None with ``settle_grasp=False``)
-    and the ``ratchet`` on its nonbackdrivable transmission (None unless
-    ``nonbackdrivable``). It unpacks as ``model, data``."""
+    ``settle_info`` of the settle that brought it there (None with ``settle_grasp=False``),
+    the ``ratchet`` on its nonbackdrivable transmission (None unless ``nonbackdrivable``)
+    and the ``commands``: the actuator forces the grasp is held with, (nu,) in each
+    actuator's unit (the preload; a scene settled by its controls: the actuator forces at
+    rest). It unpacks as ``model, data``."""
 
     model: mujoco.MjModel
     data: mujoco.MjData
     settle_info: SettleInfo | None
     ratchet: Ratchet | None
+    commands: NDArray[np.float64]
 
     def __iter__(self) -> Iterator[mujoco.MjModel | mujoco.MjData]:
         return iter((self.model, self.data))
-
-
-def _as_forces(value: ArrayLike, nu: int) -> NDArray[np.float64]:
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f"actuator forces must be {nu} numbers, got {value!r}") from exc
 
 
 def _affine(model: mujoco.MjModel) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -323,7 +310,7 @@ def _settle_commands(
 ) -> NDArray[np.float64]:
     """``commands`` as (nu,) floats, checked: finite, ``command`` "force" or "ctrl", within
     ``ctrlrange`` (controls) or ``forcerange`` (forces); :class:`SceneError` otherwise."""
-    f_c = _as_forces(commands, model.nu).reshape(-1)
+    f_c = as_forces(commands, model.nu).reshape(-1)
     if f_c.shape != (model.nu,):
         raise SceneError(f"commands has {f_c.size} values for {model.nu} actuators")
     if not np.all(np.isfinite(f_c)):
@@ -540,6 +527,17 @@ def _moves(model: mujoco.MjModel, b: int) -> bool:
     return False
 
 
+def _compile(name: str) -> mujoco.MjModel:
+    """The compiled model of scene ``name``; :class:`SceneError` (one line) if MuJoCo
+    cannot compile it."""
+    path = scene_path(name)
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:  # mujoco reports XML errors as ValueError
+        why = " ".join(str(exc).split())
+        raise SceneError(f"scene {name!r} ({path}) does not compile: {why}") from exc
+
+
 def load_scene(
     name: str,
     preload: ArrayLike | None = None,
@@ -548,17 +546,20 @@ def load_scene(
     nonbackdrivable: bool = False,
     seat: ArrayLike | None = None,
     gravity: bool = True,
+    object_body: str = "object",
     **settle_kwargs: float,
 ) -> LoadedScene:
     """Load scene ``name`` and settle its grasp.
 
     Parameters
     ----------
-    name : a scene in ``assets/scenes`` (see :func:`available_scenes`).
+    name : a scene in ``assets/scenes`` (see :func:`available_scenes`) or an MJCF file's
+        path (:func:`is_scene_file`).
     preload : commanded actuator forces, shape (nu,), in each actuator's unit
         (N m for joint motors and servos, N for tendons). Default: the scene's
-        ``ihm_preload``.
-    settle_grasp : if False, return the ``init`` keyframe without simulating.
+        ``ihm_preload``; without one, the ``init`` keyframe's controls (module doc).
+    settle_grasp : if False, return the start state (the ``init`` keyframe, else the
+        model's defaults) without simulating, ``ctrl`` 0.
     nonbackdrivable : after settling, put a :class:`ihm.ratchet.Ratchet` on every joint
         driven by a plain motor (the Barrett fingers' worm gears) and every actuated tendon
         (the tendon gripper's transmission): the stops sit at the settled pose and follow
@@ -569,73 +570,78 @@ def load_scene(
         gripper's "actively loading the distal tendon only"): first settle with the
         commands ``seat`` (a light closing force on every actuator, so that every finger
         touches; gravity off, so that the seat carries no weight and its own load stays
-        small), put the ratchet on at that pose, then switch (gravity on) to ``preload`` and settle
-        again with the ratchet following. An actuator commanded 0 in ``preload`` is then a
-        passive, nonbackdrivable support: its joint (tendon) cannot open, and the reaction
-        it carries is what the commanded ones produce. ``preload`` must be >= 0 where it
-        is ratcheted. Position servos (the Barrett spread) hold the pose of the ``init``
-        keyframe throughout (no grip phase, one round: the thesis models them rigid), where
-        a plain settle drives them toward their commanded force in rounds. Without
-        ``seat`` the grasp settles with ``preload`` and the ratchet goes on afterwards.
+        small), put the ratchet on at that pose, then switch (gravity on) to ``preload`` and
+        settle again with the ratchet following. An actuator commanded 0 in ``preload`` is
+        then a passive, nonbackdrivable support: its joint (tendon) cannot open, and the
+        reaction it carries is what the commanded ones produce. ``preload`` must be >= 0
+        where it is ratcheted. Position servos (the Barrett spread) hold the pose of the
+        ``init`` keyframe throughout (no grip phase, one round: the thesis models them
+        rigid), where a plain settle drives them toward their commanded force in rounds.
+        Without ``seat`` the grasp settles with ``preload`` and the ratchet goes on after.
     gravity : False switches the scene's gravity off (``model.opt.gravity = 0``) for good,
         e.g. to map loads that stand for the object's own weight turned around (pouring).
+    object_body : the grasped free body (:func:`settle` checks that the hand holds it).
     settle_kwargs : fields of :class:`SettleOptions` for :func:`settle` (``vtol``,
         ``hold_s``, ...); the seated protocol's settles default to ``grip_s=0``,
         ``rounds=1`` (and ``vtol=1e-3`` for the ratcheted one).
 
     Returns
     -------
-    :class:`LoadedScene`: the model, ``data`` at rest (``data.ctrl`` holds the commands), the
-    settle report and the ratchet; it unpacks as ``model, data``.
+    :class:`LoadedScene`: the model, ``data`` at rest (``data.ctrl`` holds the controls), the
+    settle report, the ratchet and the commands; it unpacks as ``model, data``.
     """
-    path = scene_path(name)
-    try:
-        model = mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as exc:  # mujoco reports XML errors as ValueError
-        raise SceneError(f"scene {name!r} ({path}) does not compile: {exc}") from exc
+    model = _compile(name)
+    check_free_body(model, object_body, name)
     if not gravity:
         model.opt.gravity[:] = 0.0
     data = mujoco.MjData(model)
     key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "init")
-    if key < 0:
-        raise SceneError(f"scene {name!r} has no keyframe named 'init'")
-    mujoco.mj_resetDataKeyframe(model, data, key)
-    f_c = default_preload(model) if preload is None else _as_forces(preload, model.nu)
-    if f_c.shape != (model.nu,):
-        raise SceneError(
-            f"preload for scene {name!r} needs {model.nu} actuator forces "
-            f"(actuators: {', '.join(model.actuator(i).name for i in range(model.nu))}), "
-            f"got shape {f_c.shape}"
-        )
-    seat_c = None
-    if seat is not None:
-        if not nonbackdrivable or not settle_grasp:
-            raise SceneError("seat is the nonbackdrivable preload protocol: it needs "
-                             "nonbackdrivable=True and settle_grasp=True")  # fmt: skip
-        seat_c = _as_forces(seat, model.nu).reshape(-1)
-        if seat_c.shape != (model.nu,):
-            raise SceneError(f"seat for scene {name!r} needs {model.nu} actuator forces, "
-                             f"got shape {seat_c.shape}")  # fmt: skip
+    if key >= 0:  # else MjData's defaults: qpos0, ctrl 0
+        mujoco.mj_resetDataKeyframe(model, data, key)
+    f_c, command = start_commands(model, data, preload, name)
+    if seat is not None and not (nonbackdrivable and settle_grasp):
+        raise SceneError("seat is the nonbackdrivable preload protocol: it needs "
+                         "nonbackdrivable=True and settle_grasp=True")  # fmt: skip
+    seat_c = None if seat is None else seat_forces(seat, model.nu, name)
     report: SettleInfo | None = None
     ratchet: Ratchet | None = None
     if not settle_grasp:
         data.ctrl[:] = 0.0
         mujoco.mj_forward(model, data)
-    elif seat_c is None:
-        report = settle(model, data, f_c, options=SettleOptions(**settle_kwargs))
     else:
-        seated = replace(SettleOptions(grip_s=0.0, rounds=1), **settle_kwargs)
-        with _gravity_off(model):  # the object placed in the hand, the fingers closed lightly
-            settle(model, data, seat_c, options=seated)
-        ratchet = transmission_ratchet(model, data)
-        # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
-        # spread servo and thumb, the elliptic friction cones against the stiff stops) while
-        # positions stay within micrometres: rest means |qvel| < 1e-3 here
-        loaded = replace(SettleOptions(grip_s=0.0, rounds=1, vtol=1e-3), **settle_kwargs)
-        report = settle(model, data, f_c, options=loaded, ratchet=ratchet)
+        try:
+            report, ratchet = _settle_scene(model, data, f_c, seat_c, command, object_body,
+                                            settle_kwargs)  # fmt: skip
+        except SceneError as exc:
+            if command == "force":
+                raise
+            hint = f"no ihm_preload: it settled with its start state's controls {f_c.tolist()}"
+            raise SceneError(f"{exc} (scene {name!r} has {hint}; give a preload)") from exc
     if nonbackdrivable and ratchet is None:
         ratchet = transmission_ratchet(model, data)
-    return LoadedScene(model, data, report, ratchet)
+    forces = f_c if command == "force" else data.actuator_force.copy()
+    return LoadedScene(model, data, report, ratchet, forces)
+
+
+def _settle_scene(
+    model: mujoco.MjModel, data: mujoco.MjData, f_c: NDArray[np.float64],
+    seat_c: NDArray[np.float64] | None, command: str, object_body: str,
+    settle_kwargs: dict[str, float],
+) -> tuple[SettleInfo, Ratchet | None]:  # fmt: skip
+    """:func:`load_scene`'s settle: with the commands ``f_c`` (``command``: forces or
+    controls), or the seated protocol when ``seat_c`` is given (its ratchet returned)."""
+    held = {"object_body": object_body, "command": command}
+    if seat_c is None:
+        return settle(model, data, f_c, options=SettleOptions(**settle_kwargs), **held), None
+    seated = replace(SettleOptions(grip_s=0.0, rounds=1), **settle_kwargs)
+    with _gravity_off(model):  # the object placed in the hand, the fingers closed lightly
+        settle(model, data, seat_c, options=seated, object_body=object_body)
+    ratchet = transmission_ratchet(model, data)
+    # the loaded, ratcheted grasp jitters at up to ~5e-4 rad/s (measured on barrett_cube:
+    # spread servo and thumb, the elliptic friction cones against the stiff stops) while
+    # positions stay within micrometres: rest means |qvel| < 1e-3 here
+    loaded = replace(SettleOptions(grip_s=0.0, rounds=1, vtol=1e-3), **settle_kwargs)
+    return settle(model, data, f_c, options=loaded, ratchet=ratchet, **held), ratchet
 
 
 def transmission_ratchet(model: mujoco.MjModel, data: mujoco.MjData) -> Ratchet:

@@ -67,18 +67,22 @@ FRAMES = ("world", "object")
 class MapSpec:
     """One resistible-force map of a scene: the settled grasp and the forces that load it.
 
-    ``scene``: a scene of ``assets/scenes`` (:func:`ihm.scenes.available_scenes`);
+    ``scene``: a scene of ``assets/scenes`` (:func:`ihm.scenes.available_scenes`) or an MJCF
+    file's path (:func:`ihm.scenes.is_scene_file`); ``object_body``: its grasped free body;
     ``plane``: two force axes (``"xy"``, ``"xz"``, ``"yz"``, ...); ``directions``: how many
     unit forces ``u = cos(a) e_1 + sin(a) e_2``, ``a = 2 pi k / directions`` [rad] from the
     plane's first axis towards its second; ``frame``: the plane's axes are the world's
     (``"world"``: the palm frame) or the object's at rest (``"object"``: the thesis' axes, as
     each scene documents them); ``preload``: commanded actuator forces, one per actuator, in
-    each actuator's unit (N m for joint motors, N for tendons; None: the scene's
-    ``ihm_preload``); ``nonbackdrivable``: ratchet the motor joints and actuated tendons
-    (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then load with
-    ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`); ``gravity=False``: no
-    gravity anywhere (the mapped force stands for the object's weight turned around, and the
-    stability methods get no base load); ``cap``: the largest force tried or asked [N]."""
+    each actuator's unit (N m for joint motors, N for tendons; None: the scene's default,
+    :func:`ihm.scenes.load_scene`); ``nonbackdrivable``: ratchet the motor joints and
+    actuated tendons (:mod:`ihm.ratchet`); ``seat``: settle with these commands first, then
+    load with ``preload`` against the ratchet (:func:`ihm.scenes.load_scene`);
+    ``gravity=False``: no gravity anywhere (the mapped force stands for the object's weight
+    turned around, and the stability methods get no base load); ``cap``: the largest force
+    tried or asked [N]; ``compliance``: the grasp model's springs, ``"unit"`` (the thesis')
+    or ``"mujoco"`` (MuJoCo's stiffness, :func:`ihm.grasp_from_mujoco`; the contacts then
+    start preloaded with the settled forces: :func:`scene_disturbance`)."""
 
     scene: str
     plane: str = "xy"
@@ -89,10 +93,24 @@ class MapSpec:
     frame: str = "world"
     gravity: bool = True
     cap: float = 10.0
+    object_body: str = "object"
+    compliance: str = "unit"
 
     def check(self, method: str, workers: int = 1) -> None:
         """:func:`check_options` on this map, for ``method`` on ``workers`` processes."""
         check_options(self.plane, method, self.directions, workers, self.cap, self.frame)
+
+    @property
+    def label(self) -> str:
+        """The scene's name in file names, titles and batch ids (a file's stem)."""
+        return scenes.scene_label(self.scene)
+
+    def load(self) -> scenes.LoadedScene:
+        """The scene loaded and settled as this map asks (:func:`ihm.scenes.load_scene`)."""
+        pre = None if self.preload is None else np.asarray(self.preload, dtype=float)
+        return scenes.load_scene(self.scene, preload=pre, nonbackdrivable=self.nonbackdrivable,
+                                 seat=self.seat, gravity=self.gravity,
+                                 object_body=self.object_body)  # fmt: skip
 
 
 def check_options(plane: str, method: str, directions: int, workers: int, cap: float,
@@ -133,24 +151,24 @@ _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION  # positions, velocities, controls, 
 def _settled_state(spec: MapSpec) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Settle the map's scene (errors surface here, in the calling process); its state, the
     ratchet's stops (None unless nonbackdrivable) and the object's orientation at rest."""
-    pre = None if spec.preload is None else np.asarray(spec.preload, dtype=float)
-    loaded = scenes.load_scene(spec.scene, preload=pre, nonbackdrivable=spec.nonbackdrivable,
-                               seat=spec.seat, gravity=spec.gravity)  # fmt: skip
+    loaded = spec.load()
     model, data = loaded
     state = np.empty(mujoco.mj_stateSize(model, _SPEC))
     mujoco.mj_getState(model, data, state, _SPEC)
     stops = None if loaded.ratchet is None else loaded.ratchet.stops.copy()
-    return state, stops, data.xmat[model.body("object").id].reshape(3, 3).copy()
+    return state, stops, data.xmat[model.body(spec.object_body).id].reshape(3, 3).copy()
 
 
-def _init(scene: str, state: np.ndarray, stops: np.ndarray | None, gravity: bool = True) -> None:
-    """Worker set-up: the scene's model and the settled state (and ratchet stops) every
-    direction starts from."""
+def _init(scene: str, state: np.ndarray, stops: np.ndarray | None, gravity: bool = True,
+          object_body: str = "object") -> None:  # fmt: skip
+    """Worker set-up: the scene's model (``scene``: a name or a file's path), the settled
+    state (and ratchet stops) every direction starts from, and the body loaded."""
     model = mujoco.MjModel.from_xml_path(str(scenes.scene_path(scene)))
     if not gravity:
         model.opt.gravity[:] = 0.0
     data = mujoco.MjData(model)
-    _STATE.update(model=model, data=data, state=state, spec=_SPEC, stops=stops)
+    _STATE.update(model=model, data=data, state=state, spec=_SPEC, stops=stops,
+                  object_body=object_body)  # fmt: skip
 
 
 def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]:
@@ -165,7 +183,8 @@ def _one(args: tuple[np.ndarray, float, dict[str, float]]) -> tuple[float, bool]
     try:
         opts = {"check_rate": False, "stop_rule": "distance", **kw}  # the maps' documented rule
         options = ResistanceOptions(cap=cap, **opts)
-        res = simulated_resistance(m, d, direction, ratchet=ratchet, options=options)
+        res = simulated_resistance(m, d, direction, ratchet=ratchet, body=_STATE["object_body"],
+                                   options=options)  # fmt: skip
     finally:
         if ratchet is not None:
             ratchet.release()
@@ -188,15 +207,16 @@ def simulated_map(
     :class:`ihm.resistance.ResistanceOptions` (``rate``, ``max_shift``, ...).
     """
     spec.check("sim", workers)
-    scenes.scene_path(spec.scene)  # unknown scene: SceneError before any worker starts
+    path = scenes.scene_path(spec.scene)  # unknown scene: SceneError before any worker starts
+    scene = str(path) if scenes.is_scene_file(spec.scene) else spec.scene  # absolute for workers
     angles, units = _directions(spec.plane, spec.directions)
     state, stops, rot = _settled_state(spec)
     if spec.frame == "object":
         units = units @ rot.T
     cap = float(spec.cap)
     dirs = [(np.r_[u, 0.0, 0.0, 0.0], cap, resistance_kwargs) for u in units]
-    out = _map_jobs(_one, dirs, workers, _init, (spec.scene, state, stops, spec.gravity),
-                    progress, f"{spec.scene} sim map", ray)  # fmt: skip
+    init = (scene, state, stops, spec.gravity, spec.object_body)
+    out = _map_jobs(_one, dirs, workers, _init, init, progress, f"{spec.label} sim map", ray)
     return _result(angles, out, spec, "sim")
 
 
@@ -226,9 +246,24 @@ def _one_analysis(args: tuple[np.ndarray, float]) -> tuple[float, bool]:
         q = MaxDisturbance(d, cap=cap, base=g.gravity_wrench)
         sol = solve(_STATE["rigid"], q, method="gws")  # an LP: no time limit to pass
     else:
-        q = MaxDisturbance(d, commands=_STATE["commands"], cap=cap, base=g.gravity_wrench)
+        q = scene_disturbance(g, d, _STATE["commands"], cap)
         sol = solve(g, q, method=_STATE["method"], **_STATE["options"])
     return map_value(sol)
+
+
+def scene_disturbance(grasp: Any, direction: np.ndarray, commands: np.ndarray | None,
+                      cap: float) -> Any:  # fmt: skip
+    """The MaxDisturbance a settled scene's grasp is asked: ``direction`` (object frame,
+    about the object origin) on top of the object's weight, with the settled ``commands``.
+    With the thesis' unit springs the contacts start unloaded and the commands and the load
+    act together (the thesis' protocol); with MuJoCo's stiffness (``grasp.compliant``) the
+    contacts start preloaded with the settled normal forces, so that the model sits at the
+    settled state under the weight alone and the load moves it from there."""
+    from stability import MaxDisturbance
+
+    preload = grasp.forces[:, 0] if grasp.compliant else None
+    return MaxDisturbance(direction, commands=commands, cap=cap, base=grasp.gravity_wrench,
+                          preload=preload)  # fmt: skip
 
 
 def map_value(sol: Any) -> tuple[float, bool]:
@@ -264,7 +299,7 @@ def analysis_map(
     jobs = [(u, float(spec.cap)) for u in units]
     args = (grasp, commands, com, method, options)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
-                    f"{spec.scene} {method} map", ray)  # fmt: skip
+                    f"{spec.label} {method} map", ray)  # fmt: skip
     return _result(angles, out, spec, method)
 
 
@@ -274,17 +309,15 @@ def _settled_grasp(spec: MapSpec) -> tuple[Any, np.ndarray, np.ndarray]:
     centre of mass in the object frame."""
     from .contacts import grasp_from_mujoco
 
-    preload = spec.preload
-    loaded = scenes.load_scene(spec.scene, preload=preload, nonbackdrivable=spec.nonbackdrivable,
-                               seat=spec.seat, gravity=spec.gravity)  # fmt: skip
+    loaded = spec.load()
     model, data = loaded
     if loaded.ratchet is not None:
         loaded.ratchet.release()
-    commands = scenes.default_preload(model) if preload is None else np.asarray(preload, float)
-    grasp = grasp_from_mujoco(model, data)
+    grasp = grasp_from_mujoco(model, data, spec.object_body, compliance=spec.compliance)
+    commands = loaded.commands
     if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
         commands = grasp.full_commands(commands)
-    return grasp, commands, model.body_ipos[model.body("object").id].copy()
+    return grasp, commands, model.body_ipos[model.body(spec.object_body).id].copy()
 
 
 def _rigid(grasp: Any) -> Any:
@@ -316,7 +349,7 @@ def scene_map_rows(
     rotation = None if spec.frame == "object" else g.object_mat
     where = MapPlane(spec.plane, spec.directions, torque_point=com, rotation=rotation)
     return map_rows(_rigid(g) if rigid else g, where, cap=spec.cap, base=g.gravity_wrench,
-                    commands=None if rigid else commands, id_prefix=f"{spec.scene}-{spec.plane}",
+                    commands=None if rigid else commands, id_prefix=f"{spec.label}-{spec.plane}",
                     method=method, options=options)  # fmt: skip
 
 
@@ -460,9 +493,9 @@ def run(
             tag = ", ratcheted" if (method == "sim" and spec.nonbackdrivable) else ""
             maps.append((f"{method}, {what}{tag}", rm))
             keys.append((method, what))
-    stem = f"{spec.scene}_{spec.plane}" + ("_object" if spec.frame == "object" else "")
+    stem = f"{spec.label}_{spec.plane}" + ("_object" if spec.frame == "object" else "")
     csv_path = write_map_csv(out / f"{stem}.csv", maps)
-    title = (f"{spec.scene}: resistible force in the {spec.frame} {spec.plane} plane [N] "
+    title = (f"{spec.label}: resistible force in the {spec.frame} {spec.plane} plane [N] "
              f"(cap {spec.cap:g} N)")  # fmt: skip
     png = plot_maps(out / f"{stem}.png", maps, title)
     agree = _agreements(maps, keys)
