@@ -11,20 +11,29 @@ Predictions use the grasp read off the same settled state (:func:`ihm.sim_maps.a
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from stability import MaxDisturbance, OptimalCommands, solve
+from stability import OptimalCommands, solve
 from stability.io import write_csv
 from stability.maps import ResistibleMap, plot_resistible
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance, touching_bodies
-from ..sim_maps import MapSpec, agreement, analysis_map, map_value, simulated_map, write_map_csv
+from ..sim_maps import (
+    MapSpec,
+    agreement,
+    analysis_map,
+    map_value,
+    scene_disturbance,
+    simulated_map,  # fmt: skip
+    write_map_csv,
+)
 
 __all__ = ["box", "box_3d", "cube", "flask"]
 
@@ -32,6 +41,8 @@ __all__ = ["box", "box_3d", "cube", "flask"]
 TIME_LIMIT = 20.0
 ETA = float(np.radians(2.5))  # the thesis' contact-normal uncertainty
 FLASK_REF = {"levels": 2, "backend": "highs", "time_limit": 60.0}
+#: the predictions with MuJoCo's stiffness (``compliance="mujoco"``), by the default 3D method
+MUJOCO_LABEL = "modesearch, mujoco"
 
 
 def _maps(
@@ -54,7 +65,9 @@ def _maps(
         if method == "sim":
             rm = simulated_map(spec, workers=workers, progress=False)
         else:
-            rm = analysis_map(spec, method=method, workers=workers, progress=False, **opts)
+            opts = dict(opts)
+            model_spec = replace(spec, compliance=opts.pop("compliance", "unit"))
+            rm = analysis_map(model_spec, method=method, workers=workers, progress=False, **opts)
         walls[label] = time.perf_counter() - t
         out.append((label, rm))
     return out, walls
@@ -106,6 +119,7 @@ def _map_methods(eta: bool = True) -> list[tuple[str, str, dict[str, Any]]]:
         m.append(("refinement 2.5 deg", "refinement",
                   {"time_limit": TIME_LIMIT, "normal_uncertainty": ETA}))  # fmt: skip
     m.append(("iterative", "iterative", {"time_limit": TIME_LIMIT}))
+    m.append((MUJOCO_LABEL, "modesearch", {"time_limit": TIME_LIMIT, "compliance": "mujoco"}))
     return m
 
 
@@ -173,8 +187,7 @@ def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: 
     d = np.r_[f, np.cross(com, f) + tq]
     t = time.perf_counter()
     commands = g.full_commands(commands)  # stops, springs: their own columns' commands
-    sol = solve(g, MaxDisturbance(d, commands=commands, cap=cap, base=g.gravity_wrench),
-                method=method, **opts)  # fmt: skip
+    sol = solve(g, scene_disturbance(g, d, commands, cap), method=method, **opts)
     wall = time.perf_counter() - t
     value, capped = map_value(sol)
     return value, capped, sol.status, wall
@@ -208,16 +221,19 @@ def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         res = {"contact_normal_forces_N": {model.body(b).name: round(float(c), 3) for b, c in
                                            zip(g.hand_bodies, g.forces[:, 0], strict=True)},
                "seated_grasp_kept": ok}  # fmt: skip
-        for method, opts in (("refinement", {"time_limit": TIME_LIMIT}),
-                             ("iterative", {"time_limit": TIME_LIMIT})):  # fmt: skip
-            v, c, status, wall = _predict(model, g, ex, pre, 50.0, method, **opts)
-            res[method] = {"value": v, "capped": c, "status": status, "wall_s": round(wall, 2)}
-            rows.append((case, method, v, c))
+        g_mj = grasp_from_mujoco(model, data, compliance="mujoco")
+        for label, grasp, method in (("refinement", g, "refinement"),
+                                     ("iterative", g, "iterative"),
+                                     (MUJOCO_LABEL, g_mj, "modesearch")):  # fmt: skip
+            v, c, status, wall = _predict(model, grasp, ex, pre, 50.0, method,
+                                          time_limit=TIME_LIMIT)  # fmt: skip
+            res[label] = {"value": v, "capped": c, "status": status, "wall_s": round(wall, 2)}
+            rows.append((case, label, v, c))
         sim = _simulate(model, data, ratchet, ex, 50.0)
         res["sim"] = {"value": sim.value, "capped": sim.capped, "reason": sim.reason}
         rows.append((case, "sim", sim.value, sim.capped))
         summary[case] = res
-    for method in ("refinement", "iterative", "sim"):
+    for method in ("refinement", "iterative", MUJOCO_LABEL, "sim"):
         a, b = summary["finger 1"][method]["value"], summary["finger 2"][method]["value"]
         summary[f"ratio finger 1 / finger 2, {method}"] = a / b if b > 0 else float("nan")
     summary["ratio thesis"] = {"predicted": 2.48, "measured": 2.23}
@@ -259,10 +275,13 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         stops = ratchet.stops.copy()
         g = grasp_from_mujoco(model, data)  # the settled grasp, before any ramp moves it
+        g_mj = grasp_from_mujoco(model, data, compliance="mujoco")
         for name, (d, cap) in loads.items():
-            v, c, status, wall = _predict(model, g, d, pre, cap, "refinement", at_com=False,
-                                          time_limit=TIME_LIMIT)  # fmt: skip
-            rows.append((tau3, name, "refinement", v, c, status, wall))
+            for label, grasp, method in (("refinement", g, "refinement"),
+                                         (MUJOCO_LABEL, g_mj, "modesearch")):  # fmt: skip
+                v, c, status, wall = _predict(model, grasp, d, pre, cap, method, at_com=False,
+                                              time_limit=TIME_LIMIT)  # fmt: skip
+                rows.append((tau3, name, label, v, c, status, wall))
             mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
             ratchet.stops = stops
             mujoco.mj_forward(model, data)
@@ -276,16 +295,17 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     _cube_plot(out / "barrett_cube.png", rows, taus)
     summary: dict[str, Any] = {"seat": seat, "tau3": taus}
     for name in loads:
-        pred = np.array([r[3] for r in rows if r[1] == name and r[2] == "refinement"])
         sim = np.array([r[3] for r in rows if r[1] == name and r[2] == "sim"])
-        both = (pred > 0) & (sim > 0)
-        summary[name] = {
-            "refinement": pred.round(4).tolist(),
-            "sim": sim.round(4).tolist(),
-            "median_abs_log_ratio": float(np.median(np.abs(np.log(pred[both] / sim[both]))))
-            if both.any() else float("nan"),
-            "both_zero_or_both_positive": float(np.mean((pred > 0) == (sim > 0))),
-        }  # fmt: skip
+        summary[name] = {"sim": sim.round(4).tolist()}
+        for label in ("refinement", MUJOCO_LABEL):
+            pred = np.array([r[3] for r in rows if r[1] == name and r[2] == label])
+            both = (pred > 0) & (sim > 0)
+            summary[name][label] = {
+                "values": pred.round(4).tolist(),
+                "median_abs_log_ratio": float(np.median(np.abs(np.log(pred[both] / sim[both]))))
+                if both.any() else float("nan"),
+                "both_zero_or_both_positive": float(np.mean((pred > 0) == (sim > 0))),
+            }  # fmt: skip
     summary["force +z [N]"]["analytic"] = [round((0.09 - t) / 0.05, 4) for t in taus]
     return summary
 
@@ -299,7 +319,7 @@ def _cube_plot(path: Path, rows, taus) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     groups = (["force +z [N]"], ["torque about +x [N m]", "torque about -x [N m]"])
     for ax, names in zip(axes, groups, strict=True):
-        for k, method in enumerate(("refinement", "sim")):
+        for k, method in enumerate(("refinement", MUJOCO_LABEL, "sim")):
             for name, style in zip(names, ("o-", "s--"), strict=False):
                 v = [r[3] for r in rows if r[1] == name and r[2] == method]
                 sign = f" ({name.split()[2]})" if len(names) > 1 else ""
@@ -330,7 +350,9 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     # or eta = 2.5 deg as the thesis, this 4-contact grasp's directions do not finish within
     # the experiment's time limits; 2 levels answer (an over-estimate: coarser cones)
     methods = [("sim", "sim", {}), ("refinement, 2 levels", "refinement", FLASK_REF),
-               ("iterative", "iterative", {"time_limit": 30.0})]  # fmt: skip
+               ("iterative", "iterative", {"time_limit": 30.0}),
+               (MUJOCO_LABEL, "modesearch",
+                {"time_limit": 30.0, "compliance": "mujoco"})]  # fmt: skip
     summary: dict[str, Any] = {"directions": n, "seat": seat, "cap_N": 10.0}
     panels, all_maps = [], []
     for tag, pre in (("no preload", [0.0] * 4), ("0.1 N m per finger", naive)):

@@ -33,12 +33,13 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from stability import Existence, MaxDisturbance, solve
+from stability import Existence, solve
 from stability.io import write_csv
 
 from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
+from ..sim_maps import scene_disturbance
 
 __all__ = ["CONTACT_SETS", "DIRECTIONS", "linkage_box"]
 
@@ -52,6 +53,7 @@ CONTACT_SETS: dict[str, dict[str, Any]] = {
     "extremes2": {"reduce": "extremes", "patch_points": 2},
     "extremes3": {"reduce": "extremes", "patch_points": 3},
     "merged": {},
+    "line, mujoco": {"reduce": "line", "compliance": "mujoco"},
 }
 
 
@@ -62,13 +64,17 @@ def _unit(name: str) -> np.ndarray:
 
 
 def predict(contact_set: str, direction: str, time_limit: float = TIME_LIMIT_S) -> dict[str, Any]:
-    """``refinement``'s MaxDisturbance along ``direction`` on top of the weight [N]."""
+    """The MaxDisturbance along ``direction`` on top of the weight [N]: ``refinement``'s
+    with the thesis' unit springs, ``modesearch``'s with MuJoCo's stiffness (a set with
+    ``compliance="mujoco"``, contacts preloaded with the settled forces:
+    :func:`ihm.sim_maps.scene_disturbance`)."""
     _, _, g = _settled(contact_set)
     w = _unit(direction)
     d = np.r_[g.object_mat.T @ w[:3], g.object_mat.T @ w[3:]]
     t0 = time.perf_counter()
-    sol = solve(g, MaxDisturbance(d, commands=g.commands, cap=CAP_N, base=g.gravity_wrench),
-                method="refinement", time_limit=time_limit)  # fmt: skip
+    method = "modesearch" if g.compliant else "refinement"
+    sol = solve(g, scene_disturbance(g, d, g.commands, CAP_N), method=method,
+                time_limit=time_limit)  # fmt: skip
     value = float("nan")
     if sol.value is not None:
         value = float(sol.value) if sol.stable else 0.0
@@ -121,7 +127,7 @@ def simulate(direction: str, impratio: float | None = None) -> dict[str, Any]:
 def linkage_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     """Run the experiment (module docstring); ``quick`` uses the line set only."""
     rows: list[dict[str, Any]] = []
-    sets = ["line"] if quick else list(CONTACT_SETS)
+    sets = ["line", "line, mujoco"] if quick else list(CONTACT_SETS)
     sim: dict[tuple[str, float], float] = {}
     for imp in (None, 10.0):
         for dname in DIRECTIONS:
@@ -178,7 +184,7 @@ def _chart(path: Path, rows: list[dict[str, Any]], sets: list[str], own: float) 
     x = np.arange(len(names))
     series = [(f"simulated, impratio {own:g}", "simulated", f"impratio {own:g}"),
               ("simulated, impratio 10", "simulated", "impratio 10")] + [
-                 (f"refinement, {cs}", "predicted", cs) for cs in sets]  # fmt: skip
+                 (f"predicted, {cs}", "predicted", cs) for cs in sets]  # fmt: skip
     width = 0.8 / len(series)
     fig, ax = plt.subplots(figsize=(9, 4.5))
     for k, (label, kind, variant) in enumerate(series):
@@ -187,7 +193,8 @@ def _chart(path: Path, rows: list[dict[str, Any]], sets: list[str], own: float) 
         ax.bar(x + (k - (len(series) - 1) / 2) * width, vals, width, label=label)
     ax.set_xticks(x, names)
     ax.set_ylabel("resistible force on top of the weight [N]")
-    ax.set_title("linkage_box: predicted (refinement) and simulated (MuJoCo) resistance")
+    ax.set_title("linkage_box: predicted (refinement, unit springs; modesearch, MuJoCo's "
+                 "stiffness) and simulated resistance")  # fmt: skip
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

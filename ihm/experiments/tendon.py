@@ -31,7 +31,7 @@ runner writes to ``OUT/tendon_box_summary.json``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,13 +39,13 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from stability import Existence, MaxDisturbance, solve
+from stability import Existence, solve
 from stability.io import write_csv
 
 from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
-from ..sim_maps import MapSpec, agreement, analysis_map, simulated_map
+from ..sim_maps import MapSpec, agreement, analysis_map, scene_disturbance, simulated_map
 
 __all__ = [
     "CASES",
@@ -75,6 +75,8 @@ FORCE_CAP_N = 10.0  # cap of the xy-plane force maps [N]
 #: the fingers following the box and the ratchets locking them there
 ONSET_TURN_RAD = 1e-3
 LINKS = ("left_proximal", "left_distal", "right_proximal", "right_distal")
+#: the predictions with MuJoCo's stiffness (``compliance="mujoco"``), by the default 3D method
+MUJOCO_LABEL = "modesearch, mujoco"
 
 
 def passive_tensions(model: mujoco.MjModel, data: mujoco.MjData) -> NDArray[np.float64]:
@@ -118,8 +120,7 @@ def _predict(
     ``(0, 0, 0, sign, 0, 0)``) on top of the weight, by ``method``."""
     t0 = time.perf_counter()
     direction = np.array([0.0, 0.0, 0.0, sign, 0.0, 0.0])
-    q = MaxDisturbance(direction, commands=grasp.full_commands(commands), cap=TORQUE_CAP_NM,
-                       base=grasp.gravity_wrench)  # fmt: skip
+    q = scene_disturbance(grasp, direction, grasp.full_commands(commands), TORQUE_CAP_NM)
     try:
         sol = solve(grasp, q, method=method, **opts)
     except Exception as exc:  # a solver error is a result too: record it, go on
@@ -258,6 +259,7 @@ def _draw_bars(ax: Any, torque: dict[str, dict[str, dict[str, dict[str, Any]]]])
         ("sim", "onset", "sim onset (1 mrad)"),
         ("refinement", "value", "refinement"),
         ("iterative", "value", "iterative"),
+        (MUJOCO_LABEL, "value", MUJOCO_LABEL),
     ]
     cases = list(torque)
     width = 0.8 / (2 * len(series))
@@ -288,12 +290,14 @@ def _draw_bars(ax: Any, torque: dict[str, dict[str, dict[str, dict[str, Any]]]])
                  "refinement: upper bound unless certified)", fontsize=9)  # fmt: skip
 
 
-def _plot_xy(path: Path, sim: Any, pred: Any, title: str) -> None:
-    """The two xy-plane maps overlaid on one polar chart; capped directions marked."""
+def _plot_xy(path: Path, sim: Any, preds: list[tuple[str, Any]], title: str) -> None:
+    """The xy-plane maps (``preds``: label, map) overlaid on one polar chart with the
+    simulated one; capped directions marked."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(subplot_kw={"projection": "polar"}, figsize=(6.4, 6.6))
-    curves = ((pred, "C1", "refinement", 8), (sim, "C0", "MuJoCo (ratcheted)", 5))
+    curves = [(rm, f"C{k + 1}", label, 8 + 2 * k) for k, (label, rm) in enumerate(preds)]
+    curves.append((sim, "C0", "MuJoCo (ratcheted)", 5))
     for rm, color, label, ms in curves:
         th = np.r_[rm.angles, rm.angles[:1]]
         r = np.r_[rm.magnitudes, rm.magnitudes[:1]]
@@ -378,15 +382,21 @@ def _torque_case(
     rows: list[list[Any]],
 ) -> dict[str, dict[str, dict[str, Any]]]:
     """The resistances [N m] to the torques ``+-x`` of one case, simulated (and its onset)
-    and by ``refinement`` and ``iterative``, per method and sign; one CSV row each is
+    and by ``refinement`` and ``iterative`` (the thesis' unit springs) and by ``modesearch``
+    with MuJoCo's stiffness (:data:`MUJOCO_LABEL`), per method and sign; one CSV row each is
     appended to ``rows``."""
-    res: dict[str, dict[str, dict[str, Any]]] = {"sim": {}, "refinement": {}, "iterative": {}}
+    res: dict[str, dict[str, dict[str, Any]]] = {"sim": {}, "refinement": {}, "iterative": {},
+                                                 MUJOCO_LABEL: {}}  # fmt: skip
+    scene, _ = settle_case(commands)
+    grasp_mj = grasp_from_mujoco(scene.model, scene.data, compliance="mujoco")
     for sign, label in ((1.0, "+x"), (-1.0, "-x")):
         res["sim"][label] = _simulate(commands, sign)
         res["refinement"][label] = _predict(grasp, commands, sign, "refinement",
                                             time_limit=st.t_torque, levels=st.levels)  # fmt: skip
         res["iterative"][label] = _predict(grasp, commands, sign, "iterative",
                                            time_limit=st.t_torque)  # fmt: skip
+        res[MUJOCO_LABEL][label] = _predict(grasp_mj, commands, sign, "modesearch",
+                                            time_limit=st.t_torque)  # fmt: skip
         for method in res:
             r = res[method][label]
             rows.append([case, method, f"{label} torque", r["value"], "N m", int(r["capped"])])
@@ -400,7 +410,7 @@ def _ratios(torque: dict[str, Any]) -> dict[str, dict[str, float]]:
     sign (thesis: about 2)."""
     ratios = {}
     for method, key in (("sim", "value"), ("sim_onset", "onset"), ("refinement", "value"),
-                        ("iterative", "value")):  # fmt: skip
+                        ("iterative", "value"), (MUJOCO_LABEL, "value")):  # fmt: skip
         src = "sim" if method == "sim_onset" else method
         ratios[method] = {
             s: _ratio(torque["distal"][src][s][key], torque["proximal"][src][s][key])
@@ -445,11 +455,15 @@ def _xy_map(out: Path, st: _Settings, workers: int, rows: list[list[Any]]) -> di
     pred = analysis_map(spec, method="refinement", workers=workers, progress=False,
                         time_limit=st.t_map, levels=st.levels)  # fmt: skip
     t_pred = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pred_mj = analysis_map(replace(spec, compliance="mujoco"), method="modesearch",
+                           workers=workers, progress=False, time_limit=st.t_map)  # fmt: skip
+    t_mj = time.perf_counter() - t0
     agree = agreement(pred, sim)
-    for rm in (sim, pred):
+    for label, rm in (("sim", sim), ("refinement", pred), (MUJOCO_LABEL, pred_mj)):
         for a, v, c in zip(rm.angles, rm.magnitudes, rm.capped, strict=True):
-            rows.append(["distal", rm.method, f"xy {np.degrees(a):.0f} deg", float(v), "N", int(c)])
-    _plot_xy(out / "tendon_box_xy.png", sim, pred,
+            rows.append(["distal", label, f"xy {np.degrees(a):.0f} deg", float(v), "N", int(c)])
+    _plot_xy(out / "tendon_box_xy.png", sim, [("refinement", pred), (MUJOCO_LABEL, pred_mj)],
              f"tendon_box, distal tendon only (F = {FORCE_N:g} N): resistible force [N] in the "
              f"xy-plane\n0 deg = +x (pushes the box into the right finger), 90 deg = +y "
              f"(out of the hand)")  # fmt: skip
@@ -462,7 +476,10 @@ def _xy_map(out: Path, st: _Settings, workers: int, rows: list[list[Any]]) -> di
         "refinement_N": pred.magnitudes.tolist(),
         "refinement_capped": pred.capped.tolist(),
         "agreement": agree,
-        "wall_s": {"sim": t_sim, "refinement": t_pred},
+        MUJOCO_LABEL + "_N": pred_mj.magnitudes.tolist(),
+        MUJOCO_LABEL + "_capped": pred_mj.capped.tolist(),
+        "agreement " + MUJOCO_LABEL: agreement(pred_mj, sim),
+        "wall_s": {"sim": t_sim, "refinement": t_pred, MUJOCO_LABEL: t_mj},
     }
 
 
