@@ -47,6 +47,8 @@ class Search:
         self.rtol = 1e-7  # complementarity, relative to the point's largest force
         self.best: tuple[NDArray[np.float64], float] | None = None  # (point, objective)
         self.unresolved: list[float] = []
+        self.heap: list[tuple[float, int, int, Node, NodeResult]] = []  # the open nodes
+        self.root_bound: float | None = None  # the root LP's bound (None: not solved)
         self.pruned = -math.inf  # the largest bound of a node pruned by the incumbent
         self.rejected = 0  # exact points refused by exact_enough
         self.nodes = self.popped = self.polishes = self.quicks = 0
@@ -299,7 +301,7 @@ class Search:
         root = lp.root()
         res = lp.solve(root)
         self.nodes = 1
-        self.heap: list[tuple[float, int, int, Node, NodeResult]] = []
+        self.heap = []
         count = itertools.count()
         if res.x is None and res.certified:
             self.root_bound = None

@@ -333,3 +333,13 @@ def test_grasp_k_query_1_bound_holds_the_exact_point(bench) -> None:
     held = solve(g, Existence(99.876 * np.asarray(q.direction), commands=q.commands),
                  method="modesearch")  # fmt: skip
     _exact(held)
+
+
+def test_existence_answered_by_the_first_stuck_point():
+    """A preloaded pinch under no load: the first point (every contact sticking) is exact,
+    so the tree is never searched; the answer still has its statistics."""
+    g = Grasp([[-0.05, 0, 0], [0.05, 0, 0]], [[1, 0, 0], [-1, 0, 0]], 0.5)
+    sol = solve(g, Existence(np.zeros(6), preload=[1.0, 1.0]), method="modesearch")
+    assert sol.status == "solved" and sol.stable
+    assert sol.stats["nodes"] == 0 and sol.stats["root_bound"] is None
+    assert sol.max_residual() < 1e-9
