@@ -75,9 +75,11 @@ __all__ = [
     "RateDependenceWarning",
     "Resistance",
     "ResistanceOptions",
+    "advance",
     "simulated_resistance",
     "solver_conditions",
     "touching_bodies",
+    "unit_direction",
 ]
 
 #: window of the object's speed in the slip rule [s]
@@ -205,7 +207,7 @@ class ResistanceOptions:
             raise GraspError(f"check_rate must be True or False, got {self.check_rate!r}")
 
 
-def _unit_direction(direction: ArrayLike) -> NDArray[np.float64]:
+def unit_direction(direction: ArrayLike) -> NDArray[np.float64]:
     """``direction`` as 6 floats scaled so that its largest block (force or torque) has
     unit norm; :class:`stability.GraspError` if it is not 6 finite numbers or is zero."""
     w = np.asarray(direction, dtype=float).reshape(-1)
@@ -281,7 +283,7 @@ def simulated_resistance(
         slip rule, rate check); its defaults when None.
     """
     opts = ResistanceOptions() if options is None else options
-    w = _unit_direction(direction)
+    w = unit_direction(direction)
     if opts.rate is None:
         rate = 1.0 if np.linalg.norm(w[:3]) > 0 else 0.05
     else:
@@ -354,8 +356,10 @@ def _rate_check(res: Resistance, slow: Resistance, rate: float, rate_tol: float)
     }
 
 
-def _advance(model: mujoco.MjModel, data: mujoco.MjData, ratchet: Ratchet | None, n: int) -> None:
-    """``n`` physics steps, through the ratchet when there is one."""
+def advance(model: mujoco.MjModel, data: mujoco.MjData, ratchet: Ratchet | None, n: int) -> None:
+    """``n`` physics steps, through the ratchet when there is one (none for ``n <= 0``)."""
+    if n <= 0:
+        return
     if ratchet is None:
         mujoco.mj_step(model, data, nstep=n)
     else:
@@ -484,7 +488,7 @@ def _ramp(
     dt = model.opt.timestep
     cap = float(opts.cap)
     data.xfrc_applied[bid] = 0.0
-    _advance(model, data, ratchet, int(round(float(opts.settle_s) / dt)))
+    advance(model, data, ratchet, int(round(float(opts.settle_s) / dt)))
     touching = touching_bodies(model, data, bid)
     motion = _Motion(data.xipos[bid].copy(), data.xquat[bid].copy(), dt,
                      float(opts.max_shift), float(opts.max_turn))  # fmt: skip
@@ -497,7 +501,7 @@ def _ramp(
     for k in range(1, int(np.ceil(cap / rate / dt)) + 1):
         s = min(cap, rate * k * dt)
         data.xfrc_applied[bid] = s * w
-        _advance(model, data, ratchet, 1)
+        advance(model, data, ratchet, 1)
         pos, quat = data.xipos[bid], data.xquat[bid]
         shift, turn = motion.moved(pos, quat)
         pa, qa = motion.window_start(k)

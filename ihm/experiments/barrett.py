@@ -371,12 +371,15 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     g = grasp_from_mujoco(model, data)
     W, _, status, _ = _predict(model, g, down, naive, 10.0, "refinement", **FLASK_REF)
     com = model.body_ipos[model.body("object").id]
-    wrench = W * np.r_[down[:3], np.cross(com, down[:3])]
-    sol = solve(g, OptimalCommands(wrench, upper=[0.0, 3.0, 3.0, 3.0]), method="refinement",
-                **{**FLASK_REF, "time_limit": 180.0})  # fmt: skip
-    opt = None if sol.commands is None else [round(float(x), 4) for x in sol.commands]
-    res: dict[str, Any] = {"W_N": W, "status": status, "optimal_commands": opt,
-                           "optimal_status": sol.status}  # fmt: skip
+    res: dict[str, Any] = {"W_N": W, "status": status, "optimal_commands": None,
+                           "optimal_status": "not asked: no value for -y"}  # fmt: skip
+    opt = None
+    if np.isfinite(W):
+        wrench = W * np.r_[down[:3], np.cross(com, down[:3])]
+        sol = solve(g, OptimalCommands(wrench, upper=[0.0, 3.0, 3.0, 3.0]),
+                    method="refinement", **{**FLASK_REF, "time_limit": 180.0})  # fmt: skip
+        opt = None if sol.commands is None else [round(float(x), 4) for x in sol.commands]
+        res.update(optimal_commands=opt, optimal_status=sol.status)
     sim_naive = _simulate(model, data, ratchet, down, 10.0)
     res["sim_naive"] = {"value": sim_naive.value, "reason": sim_naive.reason}
     if opt is not None:
