@@ -11,12 +11,36 @@ each body keeps its explicit ``<inertial>``), a 30 mm, 0.05 kg box (friction 0.7
 pads') is added between the pads as body ``object``, and gravity points along +z (the
 fingers hang down). Solver settings stay Menagerie's (pyramidal cone, impratio 10, no
 noslip). Then the recipe of ``docs/linkage.md``: ``settle`` with the actuator's
-``forcerange`` bound (5: saturated), ``grasp_from_mujoco(reduce="line")`` (refused: the
-couplers rest off their stops, held by the spring links), then with
-``spring_held="warn"``, with and without ``stop_gap``, ``refinement`` along the six axis
-forces on top of the weight, and :func:`ihm.resistance.simulated_resistance` on fresh
-settles. Writes
-``OUT/menagerie_2f85.csv`` and prints the table and the warnings.
+``forcerange`` bound (5: saturated), and per axis push (six directions, on top of the
+weight):
+
+* ``simulated``: :func:`ihm.resistance.simulated_resistance` on a fresh settle, with
+  Menagerie's settings (``variant`` "impratio 10": the box creeps, and where creep ends
+  the run first the figure is creep, rate dependent) and with MuJoCo's ``noslip``
+  post-processor (:data:`NOSLIP_ITERATIONS`) switched on for the ramp only, from the same
+  settled state (``variant`` "noslip 20": no creep, the breakaway);
+* ``grasp_from_mujoco``: the default read (``reduce="line"``), accepted or refused;
+* ``weight`` / ``predicted`` with ``compliance="unit"`` (the thesis' model, preload 0,
+  ``spring_held="warn"``, ``stop_gap`` 0 and 0.02), ``refinement``;
+* ``predicted`` with ``compliance="mujoco"`` (MuJoCo's contact, servo and spring
+  stiffness, limits within ``near_limit`` as stops with their gaps) asked from the settled
+  state: ``MaxDisturbance(d, commands=g.commands, preload=g.forces[:, 0],
+  base=g.gravity_wrench)``, one row per method (``--methods``; default ``modesearch``),
+  with the answer's bracket and its motion (``shift_m``, ``turn_rad``: the object's;
+  ``hand_rad``: the largest independent joint motion) in physical units;
+* ``small_motion``: for a ``modesearch`` answer (``compliance="mujoco"``) whose own
+  motion exceeds the simulation's hard limits (``ResistanceOptions().max_shift``,
+  ``max_turn``: 2 mm, 0.05 rad), the largest load whose answer (modesearch's exact point
+  at that load, made tidy: least virtual motion) stays within them, by bisection to
+  :data:`SMALL_MOTION_TOL` N. A diagnostic, not an answer of the model: the model
+  accepts any equilibrium of its first-order (linear) statics, whatever the size of its
+  motion; and it sees only the point modesearch returns (a smaller motion in another
+  mode would not be found), so it is an estimate from below. ``refinement``'s exact
+  points are not tidied (their motion is arbitrary), so it gets no such row.
+
+``ratio_noslip`` / ``ratio_menagerie``: a prediction over the simulated figure with
+noslip / with Menagerie's settings. Writes ``OUT/menagerie_2f85.csv`` and prints the
+rows.
 """
 
 from __future__ import annotations
@@ -29,21 +53,27 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
-from stability import Existence, MaxDisturbance, solve
+from stability import Existence, MaxDisturbance, Solution, solve
 from stability.io import write_csv
 
-from ..contacts import HandModelError, HandOptions, grasp_from_mujoco
+from ..contacts import HandModelError, HandOptions, SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..scenes import settle
 
-__all__ = ["build", "main"]
+__all__ = ["NOSLIP_ITERATIONS", "SMALL_MOTION_TOL", "build", "main", "run", "small_motion_load"]
 
 BOX_HALF_M = 0.015
 BOX_MASS_KG = 0.05
 BOX_Z_M = 0.145  # between the pads' halves (their seam is at z = 0.1415 m, open)
 FORCE = 5.0  # the actuator's forcerange bound
 DIRECTIONS = ("+x", "-x", "+y", "-y", "+z", "-z")
+CAP = 100.0  # the solvers' and the ramps' cap [N]
+#: MuJoCo's noslip iterations for the creep-free ramp (``linkage_box``'s setting)
+NOSLIP_ITERATIONS = 20
+#: resolution of the small-motion bisection [N]
+SMALL_MOTION_TOL = 1.0
 
 
 def build(path: str | Path) -> mujoco.MjModel:
@@ -62,40 +92,105 @@ def build(path: str | Path) -> mujoco.MjModel:
     return spec.compile()
 
 
-def _unit(name: str) -> np.ndarray:
+def settled(path: str | Path) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """A fresh scene (:func:`build`) closed with the saturated actuator (``settle``)."""
+    model = build(path)
+    data = mujoco.MjData(model)
+    settle(model, data, [FORCE])
+    return model, data
+
+
+def axis(name: str) -> NDArray[np.float64]:
+    """The unit wrench (force first, world axes) of an axis push such as ``"+x"``."""
     u = np.zeros(6)
     u["xyz".index(name[1])] = 1.0 if name[0] == "+" else -1.0
     return u
 
 
-def run(path: str | Path, time_limit: float = 30.0) -> list[dict[str, Any]]:
-    def fresh() -> tuple[mujoco.MjModel, mujoco.MjData]:
-        model = build(path)
-        data = mujoco.MjData(model)
-        settle(model, data, [FORCE])
-        return model, data
+def object_direction(g: SceneGrasp, name: str) -> NDArray[np.float64]:
+    """The axis push ``name`` in the grasp's object frame (the solvers' wrench frame)."""
+    u = axis(name)
+    return np.r_[g.object_mat.T @ u[:3], g.object_mat.T @ u[3:]]
 
-    model, data = fresh()
-    rows: list[dict[str, Any]] = []
-    sim = {}
+
+def motion_size(sol: Solution) -> tuple[float, float, float]:
+    """``(shift [m], turn [rad], largest |joint motion| [rad or m])`` of an answer's exact
+    point (NaN without one); physical units under ``compliance="mujoco"``."""
+    if sol.motion is None:
+        return np.nan, np.nan, np.nan
+    r = np.asarray(sol.motion, dtype=float)
+    q = np.zeros(1) if sol.hand_motion is None else np.abs(np.asarray(sol.hand_motion, float))
+    return float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:])), float(q.max(initial=0))
+
+
+def ask(g: SceneGrasp, name: str, method: str, time_limit: float, cap: float = CAP,
+        preload: NDArray[np.float64] | None = None) -> Solution:  # fmt: skip
+    """``MaxDisturbance`` along the axis push ``name`` on top of the weight, with every
+    column's command (``g.commands``: one per column of ``R``) and ``preload`` [N] per
+    contact (None: 0, the thesis' protocol)."""
+    q = MaxDisturbance(object_direction(g, name), commands=g.commands, preload=preload,
+                       cap=cap, base=g.gravity_wrench)  # fmt: skip
+    return solve(g, q, method=method, time_limit=time_limit)
+
+
+def small_motion_load(g: SceneGrasp, name: str, method: str, time_limit: float, hi: float,
+                      max_shift: float, max_turn: float) -> tuple[float, int]:  # fmt: skip
+    """The largest load ``s`` in ``[0, hi]`` [N] (to :data:`SMALL_MOTION_TOL`) whose answer
+    (``MaxDisturbance`` capped at ``s``, preloaded with MuJoCo's normal forces) holds ``s``
+    with an exact point that shifts the object at most ``max_shift`` [m] and turns it at
+    most ``max_turn`` [rad]; and the number of solves. Bisection: it assumes the answer's
+    motion grows with the load."""
+    lo, n = 0.0, 0
+    while hi - lo > SMALL_MOTION_TOL:
+        s = 0.5 * (lo + hi)
+        sol = ask(g, name, method, time_limit, cap=s, preload=g.forces[:, 0])
+        n += 1
+        shift, turn, _ = motion_size(sol)
+        held = sol.status == "solved" and bool(sol.stable) and float(sol.value) >= s * (1 - 1e-6)
+        if held and shift <= max_shift and turn <= max_turn:
+            lo = s
+        else:
+            hi = s
+    return lo, n
+
+
+def simulated(path: str | Path, noslip: int = 0) -> list[dict[str, Any]]:
+    """One ``simulated`` row per axis push: the ramp on a fresh settle, with the model's
+    settings, or with ``noslip`` iterations switched on after the settle."""
+    rows = []
     for name in DIRECTIONS:
-        m2, d2 = fresh()
+        model, data = settled(path)
+        if noslip:
+            model.opt.noslip_iterations = noslip
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            r = simulated_resistance(m2, d2, _unit(name), options=ResistanceOptions(cap=100.0))
-        sim[name] = r.value
-        rows.append({"kind": "simulated", "variant": f"impratio {m2.opt.impratio:g}",
-                     "direction": name, "value": r.value, "reason": r.reason,
-                     "creep_m": r.creep_shift,
+            r = simulated_resistance(model, data, axis(name), options=ResistanceOptions(cap=CAP))
+        variant = f"noslip {noslip}" if noslip else f"impratio {model.opt.impratio:g}"
+        rows.append({"kind": "simulated", "variant": variant, "direction": name,
+                     "value": r.value, "reason": r.reason, "creep_m": r.creep_shift,
+                     "turn_rad": r.creep_turn,
                      "slow_value": (r.rate_check or {}).get("slow_value"),
                      "warning": "; ".join(str(w.message) for w in caught)})  # fmt: skip
-    try:  # the recipe as it stands: refused, naming what is not supported
+    return rows
+
+
+def _ratios(value: float, sim: dict[str, dict[str, float]], name: str) -> dict[str, float]:
+    """``ratio_noslip`` and ``ratio_menagerie``: ``value`` over either simulated figure."""
+    return {f"ratio_{k}": value / v[name] if v[name] > 0 else np.nan for k, v in sim.items()}
+
+
+def unit_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[str, float]],
+              time_limit: float) -> list[dict[str, Any]]:  # fmt: skip
+    """``compliance="unit"`` (the thesis' model, preload 0): the default read, then
+    ``refinement`` with ``spring_held="warn"`` and ``stop_gap`` 0 and 0.02."""
+    try:
         grasp_from_mujoco(model, data, reduce="line")
         refusal = ""
     except HandModelError as exc:
         refusal = str(exc)
-    rows.append({"kind": "grasp_from_mujoco", "variant": "defaults", "status":
-                 "refused" if refusal else "accepted", "warning": refusal})  # fmt: skip
+    rows: list[dict[str, Any]] = [{"kind": "grasp_from_mujoco", "variant": "defaults",
+                                   "status": "refused" if refusal else "accepted",
+                                   "warning": refusal}]  # fmt: skip
     for gap in (0.0, 0.02):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -103,27 +198,85 @@ def run(path: str | Path, time_limit: float = 30.0) -> list[dict[str, Any]]:
                 model, data, reduce="line", hand=HandOptions(stop_gap=gap, spring_held="warn")
             )
         note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
-        variant = f"line, stop_gap {gap:g}"
+        variant = f"unit, line, stop_gap {gap:g}"
         t0 = time.perf_counter()
         w = solve(g, Existence(g.gravity_wrench, commands=g.commands), method="refinement",
                   time_limit=time_limit)  # fmt: skip
-        rows.append({"kind": "weight", "variant": variant, "status": w.status,
-                     "value": w.stable, "seconds": time.perf_counter() - t0,
-                     "hand_residual": g.hand_residual, "warning": note})  # fmt: skip
+        rows.append({"kind": "weight", "variant": variant, "method": "refinement",
+                     "status": w.status, "value": w.stable,
+                     "seconds": time.perf_counter() - t0, "hand_residual": g.hand_residual,
+                     "warning": note})  # fmt: skip
         for name in DIRECTIONS:
-            u = _unit(name)
-            d = np.r_[g.object_mat.T @ u[:3], g.object_mat.T @ u[3:]]
             t0 = time.perf_counter()
-            sol = solve(g, MaxDisturbance(d, commands=g.commands, cap=100.0,
-                                          base=g.gravity_wrench),
-                        method="refinement", time_limit=time_limit)  # fmt: skip
+            sol = ask(g, name, "refinement", time_limit)
             value = np.nan  # no answer (time-out, not converged)
             if sol.status == "solved":
                 value = float(sol.value) if sol.stable else 0.0  # 0: unstable
-            rows.append({"kind": "predicted", "variant": variant, "direction": name,
-                         "value": value, "status": sol.status,
+            rows.append({"kind": "predicted", "variant": variant, "method": "refinement",
+                         "direction": name, "value": value, "status": sol.status,
+                         "lower": sol.lower, "upper": sol.upper,
                          "seconds": time.perf_counter() - t0,
-                         "ratio": value / sim[name] if sim[name] > 0 else np.nan})  # fmt: skip
+                         **_ratios(value, sim, name)})  # fmt: skip
+    return rows
+
+
+def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[str, float]],
+                methods: tuple[str, ...], time_limit: float) -> list[dict[str, Any]]:  # fmt: skip
+    """``compliance="mujoco"`` from the settled state (preload: MuJoCo's normal forces), one
+    ``predicted`` row per method and direction, and a ``small_motion`` row where the
+    answer's motion exceeds the simulation's hard limits."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        g = grasp_from_mujoco(model, data, reduce="line", compliance="mujoco")
+    note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
+    variant = "mujoco, line"
+    limits = ResistanceOptions()
+    rows: list[dict[str, Any]] = []
+    for method in methods:
+        t0 = time.perf_counter()
+        w = solve(g, Existence(g.gravity_wrench, commands=g.commands, preload=g.forces[:, 0]),
+                  method=method, time_limit=time_limit)  # fmt: skip
+        rows.append({"kind": "weight", "variant": variant, "method": method,
+                     "status": w.status, "value": w.stable,
+                     "seconds": time.perf_counter() - t0, "hand_residual": g.hand_residual,
+                     "warning": note})  # fmt: skip
+        for name in DIRECTIONS:
+            t0 = time.perf_counter()
+            sol = ask(g, name, method, time_limit, preload=g.forces[:, 0])
+            seconds = time.perf_counter() - t0
+            value = np.nan
+            if sol.status == "solved":
+                value = float(sol.value) if sol.stable else 0.0
+            shift, turn, hand = motion_size(sol)
+            states = " ".join(() if sol.states is None else sol.states)
+            rows.append({"kind": "predicted", "variant": variant, "method": method,
+                         "direction": name, "value": value, "status": sol.status,
+                         "lower": sol.lower, "upper": sol.upper, "seconds": seconds,
+                         "capped": bool(sol.stats.get("capped", False)),
+                         **_ratios(value, sim, name), "shift_m": shift, "turn_rad": turn,
+                         "hand_rad": hand, "states": states})  # fmt: skip
+            if method != "modesearch" or not (shift > limits.max_shift or turn > limits.max_turn):
+                continue  # only modesearch's exact points are tidied to the least motion
+            t0 = time.perf_counter()
+            top = value if value > 0 else (sol.lower or CAP)  # the exact point's load
+            s, n = small_motion_load(g, name, method, time_limit, top, limits.max_shift,
+                                     limits.max_turn)  # fmt: skip
+            rows.append({"kind": "small_motion", "variant": variant, "method": method,
+                         "direction": name, "value": s, "status": f"{n} solves",
+                         "seconds": time.perf_counter() - t0, **_ratios(s, sim, name)})  # fmt: skip
+    return rows
+
+
+def run(path: str | Path, time_limit: float = 30.0,
+        methods: tuple[str, ...] = ("modesearch",)) -> list[dict[str, Any]]:  # fmt: skip
+    """Every row of the recipe (module docstring); ``time_limit`` [s] per query."""
+    rows = simulated(path) + simulated(path, NOSLIP_ITERATIONS)
+    by = {k: [r for r in rows if r["variant"].startswith(v)]
+          for k, v in (("noslip", "noslip"), ("menagerie", "impratio"))}  # fmt: skip
+    sim = {k: {r["direction"]: r["value"] for r in v} for k, v in by.items()}
+    model, data = settled(path)
+    rows += unit_rows(model, data, sim, time_limit)
+    rows += mujoco_rows(model, data, sim, methods, time_limit)
     return rows
 
 
@@ -133,10 +286,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("path", help="robotiq_2f85/2f85.xml of a MuJoCo Menagerie checkout")
     ap.add_argument("--out", default="docs/experiments", help="folder for the CSV")
     ap.add_argument("--time-limit", type=float, default=30.0, help="per query [s]")
+    ap.add_argument("--methods", nargs="+", default=["modesearch"],
+                    help="3D methods for the compliance='mujoco' rows")  # fmt: skip
     args = ap.parse_args(argv)
     if not Path(args.path).is_file():
         ap.error(f"no such file: {args.path}")
-    rows = run(args.path, args.time_limit)
+    rows = run(args.path, args.time_limit, tuple(args.methods))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "menagerie_2f85.csv", rows)
