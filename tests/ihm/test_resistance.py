@@ -436,5 +436,9 @@ def test_experiments_quick_run(tmp_path) -> None:
     for ext in (".csv", ".png", "_summary.json"):
         assert (tmp_path / f"barrett_cube{ext}").stat().st_size > 100
     z = summary["force +z [N]"]
-    np.testing.assert_allclose(z["refinement"], z["analytic"], atol=0.02)
+    np.testing.assert_allclose(z["refinement"]["values"], z["analytic"], atol=0.02)
+    # MuJoCo's stiffness: the settled forces include the ratchet's reaction, a little
+    # above the commands' (2.12 N where the commands give 2.00 N), so a little more holds
+    mj = np.array(z["modesearch, mujoco"]["values"])
+    assert np.all(mj >= np.array(z["analytic"]) - 0.02) and np.all(mj < np.array(z["sim"]))
     assert json.loads((tmp_path / "barrett_cube_summary.json").read_text())["tau3"][0] == 0.0
