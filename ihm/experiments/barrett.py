@@ -35,7 +35,7 @@ from ..sim_maps import (
     write_map_csv,
 )
 
-__all__ = ["box", "box_3d", "cube", "flask"]
+__all__ = ["box", "box_3d", "cube", "flask", "seated"]
 
 #: refinement's per-solve time limit in the experiments [s]
 TIME_LIMIT = 20.0
@@ -162,9 +162,11 @@ def _rest_ok(model: mujoco.MjModel, data: mujoco.MjData, before: np.ndarray,
     return bool(np.linalg.norm(data.xipos[b] - before) < 0.002 and now <= touching)
 
 
-def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool = True):
-    """load_scene with the protocol, and whether the loaded grasp is still the seated one
-    (compared with a seat-only settle)."""
+def seated(scene: str, preload: list[float], seat: list[float],
+           gravity: bool = True) -> tuple[scenes.LoadedScene, bool]:  # fmt: skip
+    """The scene loaded with the experiments' protocol (:func:`ihm.scenes.load_scene` with
+    ``nonbackdrivable=True`` and ``seat``), and whether the loaded grasp is still the seated
+    one: the object moved less than 2 mm from a seat-only settle and touches nothing new."""
     m0, d0 = scenes.load_scene(scene, preload=[0.0] * len(seat), nonbackdrivable=True,
                                seat=seat, gravity=gravity)  # fmt: skip
     b = m0.body("object").id
@@ -173,7 +175,13 @@ def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool =
     loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=True, seat=seat,
                                gravity=gravity)  # fmt: skip
     model, data = loaded
-    return model, data, loaded.ratchet, _rest_ok(model, data, before, touching)
+    return loaded, _rest_ok(model, data, before, touching)
+
+
+def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool = True):
+    """:func:`seated` as ``(model, data, ratchet, ok)``."""
+    loaded, ok = seated(scene, preload, seat, gravity)
+    return loaded.model, loaded.data, loaded.ratchet, ok
 
 
 def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: str,

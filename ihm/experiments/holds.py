@@ -56,9 +56,8 @@ from stability.maps import ResistibleMap, plane_axes
 from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..holds import HoldOptions, hold_trial, static_resistance
-from ..resistance import touching_bodies
 from ..sim_maps import agreement, map_value, scene_disturbance
-from .barrett import TIME_LIMIT
+from .barrett import TIME_LIMIT, seated
 
 __all__ = ["COLUMNS", "box_rows", "cube_rows", "main", "read_rows", "summarise"]
 
@@ -82,20 +81,6 @@ COLUMNS = ["scene", "map", "angle_deg", "tau3_Nm", "hold", "hold_capped", "hold_
            "unit_status", "mujoco", "mujoco_capped", "mujoco_status", "ramp",
            "ramp_capped"]  # fmt: skip
 MODELS = {"unit": "unit", "mujoco": "mujoco"}  # CSV column -> grasp_from_mujoco compliance
-
-
-def _settled(scene: str, preload: list[float], seat: list[float]) -> tuple[Any, bool]:
-    """The scene loaded with the experiments' protocol, and whether its grasp is still the
-    seated one (the object moved < 2 mm from a seat-only settle and touches nothing new),
-    as ``barrett.cube`` checks it."""
-    m0, d0 = scenes.load_scene(scene, preload=[0.0] * len(seat), nonbackdrivable=True,
-                               seat=seat)  # fmt: skip
-    b = m0.body("object").id
-    before, touching = d0.xipos[b].copy(), touching_bodies(m0, d0, b)
-    loaded = scenes.load_scene(scene, preload=preload, nonbackdrivable=True, seat=seat)
-    m, d = loaded
-    ok = np.linalg.norm(d.xipos[b] - before) < 0.002 and touching_bodies(m, d, b) <= touching
-    return loaded, bool(ok)
 
 
 def _predict(
@@ -176,7 +161,7 @@ def cube_rows(log: Any = None) -> list[dict[str, Any]]:
     for tau3 in CUBE_TAUS:
         t = time.perf_counter()
         pre = [0.0, 0.1, 0.1, tau3]
-        loaded, ok = _settled("barrett_cube", pre, CUBE_SEAT)
+        loaded, ok = seated("barrett_cube", pre, CUBE_SEAT)
         m, d = loaded
         b = m.body("object").id
         R, com = d.xmat[b].reshape(3, 3).copy(), m.body_ipos[b].copy()
