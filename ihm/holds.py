@@ -59,13 +59,14 @@ centre of mass, world axes (``data.xfrc_applied``, as in :mod:`ihm.resistance`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from stability import GraspError
+from stability.options import check_ranges, finite
 
 from .ratchet import Ratchet
 from .resistance import advance, touching_bodies, unit_direction
@@ -114,30 +115,31 @@ class HoldOptions:
     stop_on_new_contact: bool = True
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "stop_on_new_contact":
-                if not isinstance(v, (bool, np.bool_)):
-                    raise GraspError(f"stop_on_new_contact must be True or False, got {v!r}")
-                continue
-            if (
-                not isinstance(v, (int, float, np.number))
-                or isinstance(v, (bool, np.bool_))
-                or not np.isfinite(v)
-            ):
-                raise GraspError(f"{f.name} must be a finite number, got {v!r}")
-        positive = ("cap", "hold_s", "max_shift", "max_turn", "rest_shift", "rest_turn")
-        bad = [k for k in positive if not getattr(self, k) > 0]
-        bad += [k for k in ("ramp_s", "settle_s", "rest_s") if not getattr(self, k) >= 0]
-        if bad:
-            got = ", ".join(f"{k}={getattr(self, k)!r}" for k in bad)
-            raise GraspError(f"{', '.join(positive)} must be > 0 and ramp_s, settle_s, rest_s "
-                             f">= 0, got {got}")  # fmt: skip
-        if self.rest_s > self.hold_s:
-            raise GraspError(f"rest_s ({self.rest_s!r}) must not exceed hold_s ({self.hold_s!r})")
-        if not (0 < self.rtol < 1 and 0 < self.cap_tol < 1):
-            raise GraspError(f"rtol and cap_tol must lie in (0, 1), got {self.rtol!r}, "
-                             f"{self.cap_tol!r}")  # fmt: skip
+        def real(v: object) -> bool:
+            return (
+                isinstance(v, int | float | np.number)
+                and not isinstance(v, bool | np.bool_)
+                and finite(v)
+            )
+
+        def pos(v: object) -> bool:
+            return real(v) and v > 0  # type: ignore[operator]
+
+        def nonneg(v: object) -> bool:
+            return real(v) and v >= 0  # type: ignore[operator]
+
+        check_ranges(self, {
+            **{k: (pos(getattr(self, k)), "a finite number > 0")
+               for k in ("cap", "hold_s", "max_shift", "max_turn", "rest_shift", "rest_turn")},
+            **{k: (nonneg(getattr(self, k)), "a finite number >= 0")
+               for k in ("ramp_s", "settle_s")},
+            "rest_s": (nonneg(self.rest_s) and real(self.hold_s) and self.rest_s <= self.hold_s,
+                       f"a finite number in [0, hold_s = {self.hold_s!r}]"),
+            "rtol": (real(self.rtol) and 0 < self.rtol < 1, "in (0, 1)"),
+            "cap_tol": (real(self.cap_tol) and 0 < self.cap_tol < 1, "in (0, 1)"),
+            "stop_on_new_contact": (isinstance(self.stop_on_new_contact, bool | np.bool_),
+                                    "True or False"),
+        })  # fmt: skip
 
 
 @dataclass(frozen=True)
