@@ -216,14 +216,7 @@ class Grasp:
         self._G.setflags(write=False)
 
     def _check_stiffness(self, stiffness: float | ArrayLike | None) -> NDArray[np.float64]:
-        m = self._points.shape[0]
-        if stiffness is None:
-            return np.ones(m)
-        k = _as_finite("stiffness", stiffness)
-        if k.ndim == 0:
-            k = np.full(m, float(k))
-        if k.shape != (m,):
-            raise GraspError(f"stiffness must be a scalar or have shape ({m},), got {k.shape}")
+        k = self.per_contact(stiffness, "stiffness", nonneg=False, default=1.0)
         if np.any(k <= 0):
             raise GraspError(f"contact stiffness must be > 0 [N/m], got {k.tolist()}")
         return k
@@ -403,6 +396,14 @@ class Grasp:
         if nonneg and np.any(arr < 0):
             raise GraspError(f"{name} must be >= 0, got {arr.tolist()}")
         return arr
+
+    def spring_force(
+        self, normal_motion: ArrayLike, preload: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
+        """(m,) normal forces of the contacts' springs, ``max(0, p - k d_n)`` [N], for the
+        normal motions ``d_n`` (``> 0`` separates) and preloads ``p`` (default 0)."""
+        p = 0.0 if preload is None else np.asarray(preload, dtype=float)
+        return np.maximum(0.0, p - self._stiffness * np.asarray(normal_motion, dtype=float))
 
     def contact_motion(
         self, motion: ArrayLike, hand_motion: ArrayLike | None = None

@@ -97,8 +97,7 @@ def model_residuals(
     if motion is not None:
         d = grasp.contact_motion(motion, hand_motion)
         dn, dt = d[:, 0], d[:, 1:]
-        p = np.zeros(grasp.m) if preload is None else preload
-        res["spring_law"] = float(np.max(np.abs(cn - np.maximum(0.0, p - grasp.stiffness * dn))))
+        res["spring_law"] = float(np.max(np.abs(cn - grasp.spring_force(dn, preload))))
         diss = np.einsum("ij,ij->i", ct, dt) + grasp.mu * cn * np.linalg.norm(dt, axis=1)
         res["max_dissipation"] = float(np.max(np.abs(diss)))
         res["slide_alignment"] = slide_alignment(grasp.mu, c, d)

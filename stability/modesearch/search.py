@@ -93,7 +93,7 @@ class Search:
         d = d.reshape(g.m, 3)
         tol = EXACT_RTOL * (1.0 + float(np.abs(c).max(initial=0.0)))
         cone = float(np.max(np.linalg.norm(c[:, 1:], axis=1) - g.mu * c[:, 0], initial=0.0))
-        spring_force = np.maximum(0.0, self.data.preload - g.stiffness * d[:, 0])
+        spring_force = g.spring_force(d[:, 0], self.data.preload)
         spring = float(np.max(np.abs(c[:, 0] - spring_force), initial=0.0))
         return max(cone, spring, slide_alignment(g.mu, c, d)) <= tol
 
