@@ -303,50 +303,54 @@ def _add_constant(
     acc.add(tau / size, size, size, True, HandElement(name, kind, "backdrivable", size, size, note))
 
 
-def _add_springs(hs: HandState, T: NDArray[np.float64], acc: Columns) -> None:
-    """``compliance="mujoco"``: one backdrivable column per hand joint with a passive
-    spring (a torque at the state or a stiffness), ``col = T^T e_k / |T^T e_k|`` (signed
-    along the spring's torque), command ``|T^T e_k| s_k``, stiffness ``K = K_kk |T^T
-    e_k|^2`` with ``K_kk`` the joint's own ``-d qfrc_spring / d q`` (the column's motion
-    is ``v = dq_k / |T^T e_k|``). Off-diagonal passive stiffness (a tendon spring spanning
-    several joints) is not represented: named in the warnings."""
+def _add_springs(hs: HandState, T: NDArray[np.float64], acc: Columns, stiffness: bool) -> None:
+    """One backdrivable column per hand joint ``k`` with a passive spring: along the joint
+    torque of its spring at the state, ``T^T e_k s_k``, with its norm as command (none
+    below :data:`FORCE_ATOL`). ``stiffness`` (``compliance="mujoco"``): the column also
+    carries ``K = K_kk |T^T e_k|^2`` with ``K_kk`` the joint's own ``-d qfrc_spring / d q``
+    (the column's motion is ``v = dq_k / |T^T e_k|``), and a spring with no torque at the
+    state but a stiffness gets a column ``T^T e_k / |T^T e_k|`` commanded 0. Off-diagonal
+    passive stiffness (a tendon spring spanning several joints) is not represented: named
+    in the warnings."""
     spring = np.asarray(hs.data.qfrc_spring)[hs.dofs]
-    K = passive_stiffness(hs.model, hs.data, hs.dofs) if hs.dofs.size else np.zeros((0, 0))
-    diag = np.diag(K).copy()
-    off = np.abs(K - np.diag(diag)).max(initial=0.0)
-    if off > 1e-6 * max(1.0, float(np.abs(diag).max(initial=0.0))):
-        acc.warnings.append(f"passive stiffness coupling the hand joints (tendon springs, "
-                            f"up to {off:.3g}): only each joint's own is modelled")  # fmt: skip
+    diag = np.zeros(len(hs.joints))
+    if stiffness and hs.dofs.size:
+        K = passive_stiffness(hs.model, hs.data, hs.dofs)
+        diag = np.diag(K).copy()
+        off = np.abs(K - np.diag(diag)).max(initial=0.0)
+        if off > 1e-6 * max(1.0, float(np.abs(diag).max(initial=0.0))):
+            acc.warnings.append(f"passive stiffness coupling the hand joints (tendon springs, "
+                                f"up to {off:.3g}): only each joint's own is modelled")  # fmt: skip
     for k in np.flatnonzero((np.abs(spring) > FORCE_ATOL) | (diag > FORCE_ATOL)):
-        tk = T.T @ np.eye(len(hs.joints))[k]
+        e = np.zeros(len(hs.joints))
+        e[k] = 1.0
+        tk = T.T @ e
         n = float(np.linalg.norm(tk))
-        if n == 0:
-            continue  # a joint the equalities lock
-        sign = -1.0 if spring[k] < -FORCE_ATOL else 1.0
-        size = n * abs(float(spring[k]))
+        tau = T.T @ (e * spring[k])
+        size = float(np.linalg.norm(tau))
         K_a = max(0.0, float(diag[k])) * n**2
-        acc.add(sign * tk / n, size, size, True,
-                HandElement(f"spring:{hs.jname[k]}", "spring", "backdrivable", size, size,
-                            f"its torque at the state; stiffness K {K_a:.4g}"),
+        if size > FORCE_ATOL:
+            col = tau / size
+        elif K_a > 0:
+            col, size = tk / n, 0.0
+        else:
+            continue  # no torque to keep, no stiffness (or a joint the equalities lock)
+        note = (f"its torque at the state; stiffness K {K_a:.4g}" if stiffness
+                else "its torque at the state; stiffness not modelled")  # fmt: skip
+        acc.add(col, size, size, True,
+                HandElement(f"spring:{hs.jname[k]}", "spring", "backdrivable", size, size, note),
                 stiffness=K_a)  # fmt: skip
 
 
 def add_constant_torques(
     hs: HandState, T: NDArray[np.float64], acc: Columns, spring_stiffness: bool = False
 ) -> None:
-    """Passive springs (one column per joint), the links' weight at rest, ``qfrc_applied``
-    and ``xfrc_applied`` on hand bodies, as constant torques at the state;
-    ``spring_stiffness`` (``compliance="mujoco"``): the springs with their stiffness
-    (:func:`_add_springs`)."""
+    """Passive springs (one column per joint, :func:`_add_springs`; with their stiffness
+    when ``spring_stiffness``, ``compliance="mujoco"``), the links' weight at rest,
+    ``qfrc_applied`` and ``xfrc_applied`` on hand bodies, as constant torques at the
+    state."""
     model, data, dofs = hs.model, hs.data, hs.dofs
-    spring = np.asarray(data.qfrc_spring)[dofs]
-    if spring_stiffness:
-        _add_springs(hs, T, acc)
-    for k in np.flatnonzero(np.abs(spring) > FORCE_ATOL) if not spring_stiffness else []:
-        e = np.zeros(len(hs.joints))
-        e[k] = spring[k]
-        _add_constant(acc, T, e, f"spring:{hs.jname[k]}", "spring",
-                      "its torque at the state; stiffness not modelled")  # fmt: skip
+    _add_springs(hs, T, acc, spring_stiffness)
     weight = (np.asarray(data.qfrc_gravcomp) - np.asarray(data.qfrc_bias))[dofs]
     _add_constant(acc, T, weight, "gravity", "gravity", "the links' own weight (at rest)")
     _add_constant(acc, T, np.asarray(data.qfrc_applied)[dofs], "applied", "applied",
