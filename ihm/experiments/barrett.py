@@ -178,12 +178,6 @@ def seated(scene: str, preload: list[float], seat: list[float],
     return loaded, _rest_ok(model, data, before, touching)
 
 
-def _seated(scene: str, preload: list[float], seat: list[float], gravity: bool = True):
-    """:func:`seated` as ``(model, data, ratchet, ok)``."""
-    loaded, ok = seated(scene, preload, seat, gravity)
-    return loaded.model, loaded.data, loaded.ratchet, ok
-
-
 def _predict(model, g, direction_obj: np.ndarray, commands, cap: float, method: str,
              at_com: bool = True, **opts: Any) -> tuple[float, bool, str, float]:  # fmt: skip
     """MaxDisturbance on the settled grasp ``g`` (:func:`grasp_from_mujoco`) for an
@@ -224,7 +218,8 @@ def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     ex = np.array([1.0, 0, 0, 0, 0, 0])
     rows, summary = [], {"seat": seat, "cap_N": 50.0}
     for case, pre in cases.items():
-        model, data, ratchet, ok = _seated("barrett_box_3d", pre, seat)
+        loaded, ok = seated("barrett_box_3d", pre, seat)
+        (model, data), ratchet = loaded, loaded.ratchet
         g = grasp_from_mujoco(model, data)
         res = {"contact_normal_forces_N": {model.body(b).name: round(float(c), 3) for b, c in
                                            zip(g.hand_bodies, g.forces[:, 0], strict=True)},
@@ -278,7 +273,8 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     rows = []
     for tau3 in taus:
         pre = [0.0, 0.1, 0.1, tau3]
-        model, data, ratchet, ok = _seated("barrett_cube", pre, seat)
+        loaded, ok = seated("barrett_cube", pre, seat)
+        (model, data), ratchet = loaded, loaded.ratchet
         state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
         mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         stops = ratchet.stops.copy()
@@ -375,7 +371,8 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
             "(object xy-plane; y along the flask axis); cap 10 N")  # fmt: skip
     # optimal commands for the largest -y force under the naive preload
     down = np.array([0, -1.0, 0, 0, 0, 0])
-    model, data, ratchet, _ = _seated("barrett_flask", naive, seat, gravity=False)
+    loaded, _ = seated("barrett_flask", naive, seat, gravity=False)
+    (model, data), ratchet = loaded, loaded.ratchet
     g = grasp_from_mujoco(model, data)
     W, _, status, _ = _predict(model, g, down, naive, 10.0, "refinement", **FLASK_REF)
     com = model.body_ipos[model.body("object").id]
@@ -391,7 +388,8 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     sim_naive = _simulate(model, data, ratchet, down, 10.0)
     res["sim_naive"] = {"value": sim_naive.value, "reason": sim_naive.reason}
     if opt is not None:
-        m2, d2, r2, ok = _seated("barrett_flask", list(sol.commands), seat, gravity=False)
+        loaded2, ok = seated("barrett_flask", list(sol.commands), seat, gravity=False)
+        (m2, d2), r2 = loaded2, loaded2.ratchet
         s2 = _simulate(m2, d2, r2, down, 10.0)
         res["sim_optimal"] = {"value": s2.value, "reason": s2.reason, "seated_kept": ok}
     summary["optimal commands for -y"] = res
