@@ -191,6 +191,18 @@ def _add_map(sub: Any) -> None:
         metavar="DEG",
         help="contact-normal uncertainty eta [deg] for the refinement method (default 0)",
     )
+    mp_.add_argument(
+        "--compliance",
+        choices=("unit", "mujoco"),
+        default="unit",
+        help="the stability methods' springs: unit (the thesis', default) or mujoco "
+        "(MuJoCo's contact, servo and spring stiffness; ihm.grasp_from_mujoco)",
+    )
+    mp_.add_argument("--motion-limit", type=float, nargs=2, metavar=("SHIFT", "TURN"),
+                     help="with --compliance mujoco: the stability methods answer the largest "
+                     "load held with the object's centre of mass within SHIFT [m] and its "
+                     "rotation within TURN [rad] of the settled state (default 0.002 0.05, "
+                     "where the simulated ramp stops; inf inf: free)")  # fmt: skip
     mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
     mp_.add_argument("--workers", type=int, default=1, help="processes (default 1); with "
                      "--ray, the CPUs of a new local Ray cluster")  # fmt: skip
@@ -322,7 +334,11 @@ def _cmd_map(args: argparse.Namespace) -> int:
             raise MapError("--seat needs --nonbackdrivable (it ratchets the seated grasp)")
         spec = MapSpec(args.scene, args.plane, args.directions, seat=args.seat,
                        nonbackdrivable=args.nonbackdrivable, frame=args.frame,
-                       cap=args.cap, object_body=args.object_body)  # fmt: skip
+                       cap=args.cap, object_body=args.object_body, compliance=args.compliance,
+                       motion_limit=None if args.motion_limit is None
+                       else tuple(args.motion_limit))  # fmt: skip
+        for method in args.method:
+            spec.check(method, args.workers)
         csv_path, png, walls, agree = run(
             spec, preloads, args.out, methods=args.method, workers=args.workers,
             progress=not args.no_progress, ray=args.ray, **opts,

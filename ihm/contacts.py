@@ -142,6 +142,8 @@ class MujocoSource:
     contact_ids : per contact, the MuJoCo contact indices merged into it
     object_pos, object_mat : the object frame in world coordinates: origin [m] and
         rotation (columns the object's axes)
+    object_com : (3,) the object body's centre of mass in the object frame [m] (the point
+        whose displacement :mod:`ihm.resistance` measures)
     """
 
     forces: NDArray[np.float64]
@@ -154,6 +156,7 @@ class MujocoSource:
     contact_ids: list[list[int]]
     object_pos: NDArray[np.float64]
     object_mat: NDArray[np.float64]
+    object_com: NDArray[np.float64]
 
 
 class _FromSource:
@@ -197,6 +200,7 @@ class SceneGrasp(Grasp):
     contact_ids = _FromSource()
     object_pos = _FromSource()
     object_mat = _FromSource()
+    object_com = _FromSource()
 
     def __init__(self, *, source: MujocoSource, **grasp: Any) -> None:
         """``grasp``: :class:`stability.Grasp`'s arguments; ``source``: the MuJoCo record."""
@@ -504,6 +508,7 @@ def grasp_from_mujoco(
         contact_ids=[g.ids for g in groups],
         object_pos=x_o,
         object_mat=R_o,
+        object_com=R_o.T @ (data.xipos[obj] - x_o),
     )
     physical = (dict(stiffness=[g.stiffness for g in groups], actuator_stiffness=hm.stiffness,
                      stop_gap=hm.gaps) if mj else {})  # fmt: skip

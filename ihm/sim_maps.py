@@ -48,6 +48,7 @@ __all__ = [
     "check_options",
     "map_value",
     "plot_maps",
+    "ramp_limit",
     "scene_map_rows",
     "simulated_map",
     "write_map_csv",
@@ -82,7 +83,10 @@ class MapSpec:
     turned around, and the stability methods get no base load); ``cap``: the largest force
     tried or asked [N]; ``compliance``: the grasp model's springs, ``"unit"`` (the thesis')
     or ``"mujoco"`` (MuJoCo's stiffness, :func:`ihm.grasp_from_mujoco`; the contacts then
-    start preloaded with the settled forces: :func:`scene_disturbance`)."""
+    start preloaded with the settled forces: :func:`scene_disturbance`); ``motion_limit``:
+    ``(shift [m], turn [rad])``, with ``"mujoco"`` the stability methods' answers keep the
+    object's centre of mass within ``shift`` and its rotation within ``turn`` of the settled
+    state (None: the simulated ramp's 2 mm and 0.05 rad, :func:`scene_disturbance`)."""
 
     scene: str
     plane: str = "xy"
@@ -95,10 +99,21 @@ class MapSpec:
     cap: float = 10.0
     object_body: str = "object"
     compliance: str = "unit"
+    motion_limit: tuple[float, float] | None = None
 
     def check(self, method: str, workers: int = 1) -> None:
-        """:func:`check_options` on this map, for ``method`` on ``workers`` processes."""
+        """:func:`check_options` on this map, for ``method`` on ``workers`` processes, and its
+        ``compliance`` and ``motion_limit``."""
         check_options(self.plane, method, self.directions, workers, self.cap, self.frame)
+        if self.compliance not in ("unit", "mujoco"):
+            raise MapError(f"compliance must be 'unit' or 'mujoco', got {self.compliance!r}")
+        lim = self.motion_limit
+        if lim is not None and (len(lim) != 2 or not all(x > 0 for x in lim)):
+            raise MapError(f"motion_limit must be (shift [m], turn [rad]) > 0 (inf: free), "
+                           f"got {lim!r}")  # fmt: skip
+        if lim is not None and self.compliance != "mujoco":
+            raise MapError("motion_limit is in metres and radians: it needs compliance "
+                           "'mujoco' (the unit model measures motion in newtons)")  # fmt: skip
 
     @property
     def label(self) -> str:
@@ -230,9 +245,9 @@ def _result(
 
 
 def _init_analysis(grasp: Any, commands: np.ndarray, com: np.ndarray, method: str,
-                   options: dict[str, Any]) -> None:  # fmt: skip
+                   options: dict[str, Any], limit: Any) -> None:  # fmt: skip
     _STATE.update(grasp=grasp, rigid=_rigid(grasp), commands=commands, com=com, method=method,
-                  options=options)  # fmt: skip
+                  options=options, limit=limit)  # fmt: skip
 
 
 def _one_analysis(args: tuple[np.ndarray, float]) -> tuple[float, bool]:
@@ -246,24 +261,48 @@ def _one_analysis(args: tuple[np.ndarray, float]) -> tuple[float, bool]:
         q = MaxDisturbance(d, cap=cap, base=g.gravity_wrench)
         sol = solve(_STATE["rigid"], q, method="gws")  # an LP: no time limit to pass
     else:
-        q = scene_disturbance(g, d, _STATE["commands"], cap)
+        q = scene_disturbance(g, d, _STATE["commands"], cap, _STATE["limit"])
         sol = solve(g, q, method=_STATE["method"], **_STATE["options"])
     return map_value(sol)
 
 
-def scene_disturbance(grasp: Any, direction: np.ndarray, commands: np.ndarray | None,
-                      cap: float) -> Any:  # fmt: skip
+def ramp_limit() -> tuple[float, float]:
+    """The simulated ramp's hard end ``(max_shift [m], max_turn [rad])``
+    (:class:`ihm.resistance.ResistanceOptions`: 2 mm, 0.05 rad): the motion limit under
+    which a model with MuJoCo's stiffness answers what the ramp measures."""
+    opts = ResistanceOptions()
+    return opts.max_shift, opts.max_turn
+
+
+def scene_disturbance(
+    grasp: Any,
+    direction: np.ndarray,
+    commands: np.ndarray | None,
+    cap: float,
+    motion_limit: tuple[float, float] | None = None,
+) -> Any:
     """The MaxDisturbance a settled scene's grasp is asked: ``direction`` (object frame,
     about the object origin) on top of the object's weight, with the settled ``commands``.
-    With the thesis' unit springs the contacts start unloaded and the commands and the load
-    act together (the thesis' protocol); with MuJoCo's stiffness (``grasp.compliant``) the
-    contacts start preloaded with the settled normal forces, so that the model sits at the
-    settled state under the weight alone and the load moves it from there."""
-    from stability import MaxDisturbance
 
-    preload = grasp.forces[:, 0] if grasp.compliant else None
+    With the thesis' unit springs the contacts start unloaded and the commands and the load
+    act together (the thesis' protocol), and the motion is free (it is measured in newtons).
+    With MuJoCo's stiffness (``grasp.compliant``) the contacts start preloaded with the
+    settled normal forces, so that the model sits at the settled state under the weight
+    alone and the load moves it from there; and the answer keeps the object's centre of
+    mass (``grasp.object_com``) within ``shift`` [m] and its rotation within ``turn``
+    [rad] (:class:`stability.MotionLimit`), ``motion_limit = (shift, turn)``, by default
+    the simulated ramp's hard end (:func:`ramp_limit`: 2 mm, 0.05 rad), so that the model
+    answers what the ramp measures; ``(inf, inf)``: free."""
+    from stability import MaxDisturbance, MotionLimit
+
+    preload = limit = None
+    if grasp.compliant:
+        preload = grasp.forces[:, 0]
+        shift, turn = map(float, ramp_limit() if motion_limit is None else motion_limit)
+        if np.isfinite(shift) or np.isfinite(turn):
+            limit = MotionLimit(shift, turn, point=grasp.object_com)
     return MaxDisturbance(direction, commands=commands, cap=cap, base=grasp.gravity_wrench,
-                          preload=preload)  # fmt: skip
+                          preload=preload, motion_limit=limit)  # fmt: skip
 
 
 def map_value(sol: Any) -> tuple[float, bool]:
@@ -297,7 +336,7 @@ def analysis_map(
     if spec.frame == "object":
         units = units @ grasp.object_mat.T
     jobs = [(u, float(spec.cap)) for u in units]
-    args = (grasp, commands, com, method, options)
+    args = (grasp, commands, com, method, options, spec.motion_limit)
     out = _map_jobs(_one_analysis, jobs, workers, _init_analysis, args, progress,
                     f"{spec.label} {method} map", ray)  # fmt: skip
     return _result(angles, out, spec, method)
@@ -344,6 +383,8 @@ def scene_map_rows(
     spec.check(method)
     if method == "sim":
         raise MapError("batch rows take a stability method, not 'sim'")
+    if spec.compliance != "unit":
+        raise MapError("batch rows carry the unit model only (compliance 'unit')")
     g, commands, com = _settled_grasp(spec)
     rigid = method == "gws"  # a rigid-hand method: the contacts only, no commands
     rotation = None if spec.frame == "object" else g.object_mat

@@ -15,7 +15,7 @@ from .api import available_methods, method_info, register, solve
 from .errors import GraspError, MethodError, ModelError, SolverError
 from .grasp import Grasp
 from .options import Deadline, MethodOptions
-from .queries import Existence, MaxDisturbance, OptimalCommands, Query
+from .queries import Existence, MaxDisturbance, MotionLimit, OptimalCommands, Query
 from .solution import Solution, Stats
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "MaxDisturbance",
     "MethodError",
     "ModelError",
+    "MotionLimit",
     "OptimalCommands",
     "Query",
     "Deadline",

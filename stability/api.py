@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from .errors import GraspError, MethodError
 from .grasp import Grasp
 from .options import MethodOptions
-from .queries import Existence, MaxDisturbance, OptimalCommands, Query
+from .queries import Existence, MaxDisturbance, OptimalCommands, Query, checked_motion_limit
 from .solution import Solution
 
 __all__ = [
@@ -49,6 +49,7 @@ class MethodInfo:
     summary: str
     options: type[MethodOptions]  # its options, checked once by solve()
     compliance: bool = False  # models contact and actuator stiffness and stop gaps
+    motion_limit: bool = False  # answers queries with a MotionLimit
 
     def refuses(self, grasp: Grasp, query: Query) -> str | None:
         """Why this method cannot answer, or None when it can."""
@@ -64,6 +65,8 @@ class MethodInfo:
         if grasp.compliant and not self.compliance:
             return ("models unit contact springs and rigid transmissions only (this grasp "
                     "has stiffness or stop gaps)")  # fmt: skip
+        if getattr(query, "motion_limit", None) is not None and not self.motion_limit:
+            return "does not bound the object's motion (the query has a motion_limit)"
         return None
 
 
@@ -86,17 +89,19 @@ def register(
     hand: bool = False,
     summary: str = "",
     compliance: bool = False,
+    motion_limit: bool = False,
 ) -> Callable[[Callable[..., Solution]], Callable[..., Solution]]:
     """Decorator: add a solver function ``fn(grasp, query, opts, deadline) -> Solution``
     whose options are the frozen dataclass ``options`` (:class:`MethodOptions`):
     :func:`solve` builds them from its keyword arguments and starts the
     :class:`~stability.options.Deadline` of their ``time_limit``. ``compliance``: the
     method models ``Grasp.stiffness``, ``actuator_stiffness`` and ``stop_gap`` (others
-    refuse a grasp that sets them)."""
+    refuse a grasp that sets them); ``motion_limit``: it honours a query's
+    :class:`~stability.queries.MotionLimit` (others refuse such a query)."""
 
     def deco(fn: Callable[..., Solution]) -> Callable[..., Solution]:
         _METHODS[name] = MethodInfo(
-            name, fn, queries, planar, spatial, hand, summary, options, compliance
+            name, fn, queries, planar, spatial, hand, summary, options, compliance, motion_limit
         )
         return fn
 
@@ -175,8 +180,9 @@ def solve(grasp: Grasp, query: Query, method: str | None = None, **options: Any)
     if unit == 1.0:
         sol = info.fn(grasp, query, opts, opts.deadline())
     else:
-        sol = info.fn(in_motion_unit(grasp, unit), query, opts, opts.deadline())
-        sol = replace(sol, grasp=grasp, motion=_times(sol.motion, 1.0 / unit),
+        sol = info.fn(in_motion_unit(grasp, unit), query_in_motion_unit(grasp, query, unit), opts,
+                      opts.deadline())  # fmt: skip
+        sol = replace(sol, grasp=grasp, query=query, motion=_times(sol.motion, 1.0 / unit),
                       hand_motion=_times(sol.hand_motion, 1.0 / unit),
                       hand_reference=_times(sol.hand_reference, 1.0 / unit))  # fmt: skip
     sol.stats["time_s"] = time.perf_counter() - t0
@@ -201,6 +207,16 @@ def in_motion_unit(grasp: Grasp, unit: float) -> Grasp:
     return Grasp(grasp.points, grasp.normals, grasp.mu, None if grasp.planar else grasp.tangents,
                  grasp.J, grasp.R, grasp.backdrivable, grasp.stiffness / unit, K,
                  gap)  # fmt: skip
+
+
+def query_in_motion_unit(grasp: Grasp, query: Query, unit: float) -> Query:
+    """``query`` with its motion limit (if any, validated on ``grasp``) in motions of
+    ``1 / unit`` m, as :func:`in_motion_unit` measures them: ``shift`` and ``turn`` times
+    ``unit``."""
+    lim = checked_motion_limit(grasp, query)
+    if lim is None:
+        return query
+    return replace(query, motion_limit=replace(lim, shift=lim.shift * unit, turn=lim.turn * unit))
 
 
 def _times(x: NDArray[np.float64] | None, factor: float) -> NDArray[np.float64] | None:

@@ -179,6 +179,7 @@ class ExactOptions(MipOptions):
     options=ExactOptions,
     hand=True,
     compliance=True,
+    motion_limit=True,
     summary="exact nonconvex problem (circular cone, bilinear maximum dissipation) solved "
     "globally by SCIP's spatial branch-and-bound: the accuracy reference for small grasps",
 )

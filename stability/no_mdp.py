@@ -23,7 +23,7 @@ from typing import Any
 from .api import register
 from .grasp import Grasp
 from .model.problem import ExactProblem, scale_bounds
-from .model.query import QueryData
+from .model.query import QueryData, add_query
 from .model.run import MipOptions, Stop, bounds_stats, run, solution, stopped
 from .options import Deadline
 from .queries import Existence, MaxDisturbance
@@ -40,6 +40,7 @@ __all__: list[str] = []
     options=MipOptions,
     hand=True,
     compliance=True,
+    motion_limit=True,
     summary="thesis ch. 5 baseline: one MIP, friction cone without maximum dissipation "
     "(wrong where a virtual rotation wedges the object)",
 )
@@ -59,13 +60,7 @@ def _attempt(grasp, query, data, opts, deadline, bound_factor, stats) -> Solutio
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, bound_factor)
     prob = ExactProblem(grasp, data.preload, data.hand, bounds, opts.edges, name="no_mdp")
     bounds_stats(bounds, stats)
-    s = None
-    if data.direction is None:
-        prob.add_object_equilibrium(data.wrench)
-    else:
-        base = 0.0 * data.direction if data.base is None else data.base
-        s = prob.add_object_equilibrium(base, data.direction, data.cap)
-        prob.model.set_objective([s], [1.0], maximize=True)
+    s = add_query(prob, data)
     try:
         pt = run(prob, opts, deadline, stats)
     except Stop as e:

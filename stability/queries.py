@@ -4,11 +4,14 @@ Wrenches are ``(fx, fy, tz)`` for planar grasps and ``(fx, fy, fz, tx, ty, tz)``
 for spatial ones, applied to the object about the object-frame origin, in N and
 N m. A preload ``p_i >= 0`` [N] pre-stresses the unit virtual spring at contact
 ``i``: ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance). ``commands``
-are actuator forces for hands with a transmission ``R`` (chapter 5).
+are actuator forces for hands with a transmission ``R`` (chapter 5). ``motion_limit``
+(:class:`MotionLimit`, our extension) asks for an equilibrium whose object motion stays
+within a bound, as a simulated ramp stops at a set displacement.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,11 +22,31 @@ from .errors import GraspError
 __all__ = [
     "Existence",
     "MaxDisturbance",
+    "MotionLimit",
     "OptimalCommands",
     "Query",
     "checked_base",
     "checked_direction_cap",
+    "checked_motion_limit",
 ]
+
+
+@dataclass(frozen=True)
+class MotionLimit:
+    """The object motion an equilibrium may have: the displacement of ``point`` at most
+    ``shift`` and the rotation at most ``turn`` (Euclidean norms of the small-motion model's
+    ``v + omega x point`` and ``omega``; planar: ``|theta|``).
+
+    Units are the grasp's: with physical stiffness (``Grasp(..., stiffness=...)`` in N/m)
+    ``shift`` is in m and ``turn`` in rad, as a simulator's stop rule; with the thesis' unit
+    springs a motion is measured in newtons of spring force. ``point`` (object frame, default
+    the origin) is where the displacement is measured, e.g. the centre of mass. ``inf``
+    leaves a part free. Our extension of the thesis' model (module
+    :mod:`stability.model.problem`, "motion limit")."""
+
+    shift: float = math.inf
+    turn: float = math.inf
+    point: ArrayLike | None = None
 
 
 @dataclass(frozen=True)
@@ -37,6 +60,7 @@ class Existence:
     wrench: ArrayLike
     preload: float | ArrayLike | None = None
     commands: ArrayLike | None = None
+    motion_limit: MotionLimit | None = None
 
 
 @dataclass(frozen=True)
@@ -47,7 +71,8 @@ class MaxDisturbance:
     and is flagged ``stats["capped"] = True``. ``base`` (default zero) is a wrench that is
     always applied, in the grasp's wrench frame and units like ``direction``: e.g. the
     object's weight (``ihm.contacts.SceneGrasp.gravity_wrench``). When ``base`` alone is
-    not stable the answer is unstable.
+    not stable the answer is unstable. ``motion_limit``: the largest ``s`` whose
+    equilibrium moves the object within the limit (:class:`MotionLimit`).
     """
 
     direction: ArrayLike
@@ -55,6 +80,7 @@ class MaxDisturbance:
     commands: ArrayLike | None = None
     cap: float = 1e3
     base: ArrayLike | None = None
+    motion_limit: MotionLimit | None = None
 
 
 @dataclass(frozen=True)
@@ -101,3 +127,25 @@ def checked_base(grasp, query: MaxDisturbance) -> NDArray[np.float64]:
     if query.base is None:
         return np.zeros(grasp.wrench_dim)
     return grasp.wrench(query.base, "base")
+
+
+def checked_motion_limit(grasp, query: Query) -> MotionLimit | None:
+    """The query's :class:`MotionLimit` validated (``shift``, ``turn`` > 0 or inf, ``point``
+    a finite point of the grasp's dimension, returned as an array), or None when it has
+    none; :class:`GraspError` otherwise."""
+    lim = getattr(query, "motion_limit", None)
+    if lim is None:
+        return None
+    if not isinstance(lim, MotionLimit):
+        raise GraspError(f"motion_limit must be a stability.MotionLimit, got {type(lim).__name__}")
+    try:
+        shift, turn = float(lim.shift), float(lim.turn)
+    except (TypeError, ValueError) as exc:
+        raise GraspError(f"MotionLimit shift and turn must be numbers, got {lim!r}") from exc
+    if not (shift > 0 and turn > 0) or math.isnan(shift) or math.isnan(turn):
+        raise GraspError(f"MotionLimit shift and turn must be > 0 (inf: free), got {lim!r}")
+    point = np.zeros(grasp.dim) if lim.point is None else np.array(lim.point, dtype=float)
+    if point.shape != (grasp.dim,) or not np.all(np.isfinite(point)):
+        raise GraspError(f"MotionLimit point must be {grasp.dim} finite numbers (object "
+                         f"frame), got {lim.point!r}")  # fmt: skip
+    return MotionLimit(shift, turn, point)

@@ -619,6 +619,7 @@ def _answer(method: str, grasp: Grasp, query: Any, stats: dict[str, Any], best: 
     options=RefinementOptions,
     hand=True,
     compliance=True,
+    motion_limit=True,
     summary="thesis ch. 6: Coulomb friction with maximum dissipation, hierarchical refinement "
     "of a convex relaxation (infeasible at any level = unstable)",
 )
@@ -640,9 +641,8 @@ def _solve_refinement(grasp: Grasp, query: Any, opts: RefinementOptions,
 
     sol, notes = enlarge_box(attempt, opts.bound_factor, deadline, lambda prev, sol: None)
     if sol is None:  # every box tried cut the optimum off, or no time was left to enlarge
-        timeout = deadline.expired()
         return Solution(None, "refinement", grasp, query,
-                        status="timeout" if timeout else "error",
+                        status="timeout" if deadline.expired() else "error",
                         stats={"message": "the model's box cut the optimum off at every bound "
                                f"tried: {cuts}", "box_enlarged": notes})  # fmt: skip
     if notes:

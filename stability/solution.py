@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .grasp import Grasp, actuator_compliance
-from .queries import Existence, MaxDisturbance, Query
+from .queries import Existence, MaxDisturbance, MotionLimit, Query, checked_motion_limit
 
 __all__ = [
     "MODEL_CONDITIONS",
@@ -18,13 +18,14 @@ __all__ = [
     "Solution",
     "Stats",
     "model_residuals",
+    "motion_excess",
     "slide_alignment",
 ]
 
 # every key model_residuals can return, in its order
 MODEL_CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", "max_dissipation",
               "slide_alignment", "hand_equilibrium", "actuator_command", "nonbackdrivable",
-              "actuator_complementarity")  # fmt: skip
+              "actuator_complementarity", "motion_limit")  # fmt: skip
 # a contact slides when |d_t| > SLIDE_TOL (1 + max |d|) (slide_alignment; measured)
 SLIDE_TOL = 1e-9
 
@@ -124,6 +125,21 @@ def model_residuals(
             both = np.minimum(np.maximum(lam, 0.0), np.maximum(w, 0.0))
             res["actuator_complementarity"] = float(np.max(both, initial=0.0))
     return res
+
+
+def motion_excess(grasp: Grasp, limit: MotionLimit, motion: NDArray[np.float64]) -> float:
+    """How far the object motion ``r`` exceeds ``limit`` (a validated
+    :class:`~stability.queries.MotionLimit`): ``max(0, |v + omega x p| - shift,
+    |omega| - turn)`` [the grasp's length unit, rad], 0 within it."""
+    r = np.asarray(motion, dtype=float)
+    k, p = grasp.dim, np.asarray(limit.point, dtype=float)
+    v, w = r[:k], r[k:]
+    if grasp.planar:
+        shift = v + w[0] * np.array([-p[1], p[0]])
+    else:
+        shift = v + np.cross(w, p)
+    over = max(float(np.linalg.norm(shift)) - limit.shift, float(np.linalg.norm(w)) - limit.turn)
+    return max(0.0, over)
 
 
 def slide_alignment(
@@ -325,7 +341,8 @@ class Solution:
     def residuals(self) -> dict[str, float]:
         """Violation of each model condition by the returned forces and motion.
 
-        See :func:`model_residuals`. Methods without a passive model
+        See :func:`model_residuals`; with a query's motion limit also ``motion_limit``
+        (:func:`motion_excess`). Methods without a passive model
         (``gws``) return no motion, so only equilibrium and cone terms appear.
         Raises ``ValueError`` when there is no solution to check.
         """
@@ -341,7 +358,7 @@ class Solution:
             commands = self.commands
         if not isinstance(q, Existence | MaxDisturbance) and self.motion is not None:
             preload = self.grasp.per_contact(q.preload, "preload")
-        return model_residuals(
+        res = model_residuals(
             self.grasp,
             self.wrench,
             self.forces,
@@ -352,6 +369,10 @@ class Solution:
             commands,
             self.hand_reference,
         )
+        limit = checked_motion_limit(self.grasp, q)
+        if limit is not None and self.motion is not None:
+            res["motion_limit"] = motion_excess(self.grasp, limit, self.motion)
+        return res
 
     def max_residual(
         self, conditions: Iterable[str] | None = None, *, enforced: bool = False

@@ -24,19 +24,14 @@ weight):
   ``spring_held="warn"``, ``stop_gap`` 0 and 0.02), ``refinement``;
 * ``predicted`` with ``compliance="mujoco"`` (MuJoCo's contact, servo and spring
   stiffness, limits within ``near_limit`` as stops with their gaps) asked from the settled
-  state: ``MaxDisturbance(d, commands=g.commands, preload=g.forces[:, 0],
-  base=g.gravity_wrench)``, one row per method (``--methods``; default ``modesearch``),
-  with the answer's bracket and its motion (``shift_m``, ``turn_rad``: the object's;
-  ``hand_rad``: the largest independent joint motion) in physical units;
-* ``small_motion``: for a ``modesearch`` answer (``compliance="mujoco"``) whose own
-  motion exceeds the simulation's hard limits (``ResistanceOptions().max_shift``,
-  ``max_turn``: 2 mm, 0.05 rad), the largest load whose answer (modesearch's exact point
-  at that load, made tidy: least virtual motion) stays within them, by bisection to
-  :data:`SMALL_MOTION_TOL` N. A diagnostic, not an answer of the model: the model
-  accepts any equilibrium of its first-order (linear) statics, whatever the size of its
-  motion; and it sees only the point modesearch returns (a smaller motion in another
-  mode would not be found), so it is an estimate from below. ``refinement``'s exact
-  points are not tidied (their motion is arbitrary), so it gets no such row.
+  state (:func:`ihm.sim_maps.scene_disturbance`: contacts preloaded with MuJoCo's normal
+  forces, the weight as base load), one row per method (``--methods``; default
+  ``modesearch``) and motion limit: variant ``"mujoco, line"`` within the ramp's hard end
+  (the object's centre of mass within 2 mm, its rotation within 0.05 rad: the question
+  the ramp answers), ``"mujoco, line, free"`` without a limit (the first-order model's
+  largest load, whatever its motion). Each row has the answer's bracket and its motion
+  (``shift_m``, ``turn_rad``: the object's; ``hand_rad``: the largest independent joint
+  motion) in physical units.
 
 ``ratio_noslip`` / ``ratio_menagerie``: a prediction over the simulated figure with
 noslip / with Menagerie's settings. Writes ``OUT/menagerie_2f85.csv`` and prints the
@@ -46,6 +41,7 @@ rows.
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 import warnings
 from pathlib import Path
@@ -61,8 +57,9 @@ from stability.io import write_csv
 from ..contacts import HandModelError, HandOptions, SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..scenes import settle
+from ..sim_maps import scene_disturbance
 
-__all__ = ["NOSLIP_ITERATIONS", "SMALL_MOTION_TOL", "build", "main", "run", "small_motion_load"]
+__all__ = ["NOSLIP_ITERATIONS", "build", "main", "run"]
 
 BOX_HALF_M = 0.015
 BOX_MASS_KG = 0.05
@@ -72,8 +69,6 @@ DIRECTIONS = ("+x", "-x", "+y", "-y", "+z", "-z")
 CAP = 100.0  # the solvers' and the ramps' cap [N]
 #: MuJoCo's noslip iterations for the creep-free ramp (``linkage_box``'s setting)
 NOSLIP_ITERATIONS = 20
-#: resolution of the small-motion bisection [N]
-SMALL_MOTION_TOL = 1.0
 
 
 def build(path: str | Path) -> mujoco.MjModel:
@@ -123,35 +118,13 @@ def motion_size(sol: Solution) -> tuple[float, float, float]:
     return float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:])), float(q.max(initial=0))
 
 
-def ask(g: SceneGrasp, name: str, method: str, time_limit: float, cap: float = CAP,
-        preload: NDArray[np.float64] | None = None) -> Solution:  # fmt: skip
+def ask(g: SceneGrasp, name: str, method: str, time_limit: float) -> Solution:
     """``MaxDisturbance`` along the axis push ``name`` on top of the weight, with every
-    column's command (``g.commands``: one per column of ``R``) and ``preload`` [N] per
-    contact (None: 0, the thesis' protocol)."""
-    q = MaxDisturbance(object_direction(g, name), commands=g.commands, preload=preload,
-                       cap=cap, base=g.gravity_wrench)  # fmt: skip
+    column's command (``g.commands``: one per column of ``R``), unit springs unloaded (the
+    thesis' protocol)."""
+    q = MaxDisturbance(object_direction(g, name), commands=g.commands, cap=CAP,
+                       base=g.gravity_wrench)  # fmt: skip
     return solve(g, q, method=method, time_limit=time_limit)
-
-
-def small_motion_load(g: SceneGrasp, name: str, method: str, time_limit: float, hi: float,
-                      max_shift: float, max_turn: float) -> tuple[float, int]:  # fmt: skip
-    """The largest load ``s`` in ``[0, hi]`` [N] (to :data:`SMALL_MOTION_TOL`) whose answer
-    (``MaxDisturbance`` capped at ``s``, preloaded with MuJoCo's normal forces) holds ``s``
-    with an exact point that shifts the object at most ``max_shift`` [m] and turns it at
-    most ``max_turn`` [rad]; and the number of solves. Bisection: it assumes the answer's
-    motion grows with the load."""
-    lo, n = 0.0, 0
-    while hi - lo > SMALL_MOTION_TOL:
-        s = 0.5 * (lo + hi)
-        sol = ask(g, name, method, time_limit, cap=s, preload=g.forces[:, 0])
-        n += 1
-        shift, turn, _ = motion_size(sol)
-        held = sol.status == "solved" and bool(sol.stable) and float(sol.value) >= s * (1 - 1e-6)
-        if held and shift <= max_shift and turn <= max_turn:
-            lo = s
-        else:
-            hi = s
-    return lo, n
 
 
 def simulated(path: str | Path, noslip: int = 0) -> list[dict[str, Any]]:
@@ -223,16 +196,14 @@ def unit_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[st
 def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[str, float]],
                 methods: tuple[str, ...], time_limit: float) -> list[dict[str, Any]]:  # fmt: skip
     """``compliance="mujoco"`` from the settled state (preload: MuJoCo's normal forces), one
-    ``predicted`` row per method and direction, and a ``small_motion`` row where the
-    answer's motion exceeds the simulation's hard limits."""
+    ``predicted`` row per method, motion limit (the ramp's, and free) and direction."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         g = grasp_from_mujoco(model, data, reduce="line", compliance="mujoco")
     note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
-    variant = "mujoco, line"
-    limits = ResistanceOptions()
     rows: list[dict[str, Any]] = []
-    for method in methods:
+    limits = {"mujoco, line": None, "mujoco, line, free": (np.inf, np.inf)}
+    for method, (variant, limit) in itertools.product(methods, limits.items()):
         t0 = time.perf_counter()
         w = solve(g, Existence(g.gravity_wrench, commands=g.commands, preload=g.forces[:, 0]),
                   method=method, time_limit=time_limit)  # fmt: skip
@@ -242,7 +213,8 @@ def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[
                      "warning": note})  # fmt: skip
         for name in DIRECTIONS:
             t0 = time.perf_counter()
-            sol = ask(g, name, method, time_limit, preload=g.forces[:, 0])
+            q = scene_disturbance(g, object_direction(g, name), g.commands, CAP, limit)
+            sol = solve(g, q, method=method, time_limit=time_limit)
             seconds = time.perf_counter() - t0
             value = np.nan
             if sol.status == "solved":
@@ -255,15 +227,6 @@ def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[
                          "capped": bool(sol.stats.get("capped", False)),
                          **_ratios(value, sim, name), "shift_m": shift, "turn_rad": turn,
                          "hand_rad": hand, "states": states})  # fmt: skip
-            if method != "modesearch" or not (shift > limits.max_shift or turn > limits.max_turn):
-                continue  # only modesearch's exact points are tidied to the least motion
-            t0 = time.perf_counter()
-            top = value if value > 0 else (sol.lower or CAP)  # the exact point's load
-            s, n = small_motion_load(g, name, method, time_limit, top, limits.max_shift,
-                                     limits.max_turn)  # fmt: skip
-            rows.append({"kind": "small_motion", "variant": variant, "method": method,
-                         "direction": name, "value": s, "status": f"{n} solves",
-                         "seconds": time.perf_counter() - t0, **_ratios(s, sim, name)})  # fmt: skip
     return rows
 
 

@@ -31,6 +31,14 @@ displacement is measured in newtons):
   ``K = 0, g = 0`` is the thesis' model exactly; a backdrivable actuator has ``f = f_c``
   and a free ``v = v_p``. :attr:`ExactPoint.actuator_forces` is the physical force.
 
+Motion limit (our extension; query ``motion_limit``, :class:`~stability.queries.MotionLimit`):
+the displacement of a point ``p`` of the object, ``v + omega x p``, and the rotation
+``omega`` are held within balls of radius ``shift`` and ``turn`` by the inscribed polytopes
+``|a_j . x| <= radius / rho`` (:func:`ball_directions`: 31 directions of the icosahedral
+group, ``rho = 1.0705``; planar: 8 directions of a 16-gon and ``|theta| <= turn``), so that
+every answer honours the Euclidean limit and reaches at least ``1 / rho`` of it in every
+direction.
+
 The bounds ``B, V, E`` are not arbitrary big-M constants: :func:`scale_bounds` derives
 them from the query's own force scale (the largest applied force or torque / size,
 preload, or contact force that balances a command), times ``bound_factor``. They are part
@@ -48,6 +56,8 @@ the cone), so with ``edges % 4 == 0`` the in-plane directions ``+-t1, +-t2`` kee
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -57,9 +67,10 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import GraspError
 from ..grasp import Grasp, actuator_compliance
 from ..mip import INF, MipModel
+from ..queries import MotionLimit
 
-__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "clean_wrench",
-           "hand_data", "length_scale", "scale_bounds"]  # fmt: skip
+__all__ = ["ExactBounds", "ExactProblem", "ExactPoint", "actuator_vector", "ball_directions",
+           "clean_wrench", "hand_data", "length_scale", "scale_bounds"]  # fmt: skip
 
 
 def length_scale(grasp: Grasp) -> float:
@@ -67,6 +78,37 @@ def length_scale(grasp: Grasp) -> float:
     all contacts sit at the origin). Torques divided by ``L`` are forces."""
     L = float(np.max(np.linalg.norm(grasp.points, axis=1)))
     return L if L > 0 else 1.0
+
+
+@functools.cache
+def ball_directions(dim: int) -> tuple[NDArray[np.float64], float]:
+    """Unit directions ``a_j`` (one per antipodal pair) and ``rho``, the largest norm of a
+    vertex of ``{x: |a_j . x| <= 1}``: the polytope ``|a_j . x| <= r / rho`` lies inside the
+    ball of radius ``r`` and contains the ball of radius ``r / rho``. ``dim`` 3: the 6
+    vertex, 10 face and 15 edge directions of the icosahedron (``rho = 1.0705``, by vertex
+    enumeration); 2: 8 directions ``pi j / 8`` (a 16-gon, ``rho = 1 / cos(pi / 16)``)."""
+    if dim == 2:
+        th = np.pi * np.arange(8) / 8
+        return np.stack([np.cos(th), np.sin(th)], axis=1), 1.0 / math.cos(math.pi / 16)
+    phi = (1.0 + math.sqrt(5.0)) / 2.0
+    ico = np.array([[0, 1, phi], [0, 1, -phi], [1, phi, 0], [1, -phi, 0], [phi, 0, 1],
+                    [-phi, 0, 1]])  # fmt: skip
+    dod = np.array([[1, 1, 1], [1, 1, -1], [1, -1, 1], [-1, 1, 1], [0, 1 / phi, phi],
+                    [0, 1 / phi, -phi], [1 / phi, phi, 0], [1 / phi, -phi, 0], [phi, 0, 1 / phi],
+                    [-phi, 0, 1 / phi]])  # fmt: skip
+    verts = np.r_[ico, -ico]  # edges join icosahedron vertices 2 apart: their midpoints
+    mids = [(verts[i] + verts[j]) / 2 for i, j in itertools.combinations(range(12), 2)
+            if abs(np.linalg.norm(verts[i] - verts[j]) - 2.0) < 1e-9]  # fmt: skip
+    mids = [x for k, x in enumerate(mids) if not any(np.allclose(x, -y) for y in mids[:k])]
+    a = np.r_[ico, dod, np.array(mids)]
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    planes = np.r_[a, -a]
+    trip = np.array(list(itertools.combinations(range(len(planes)), 3)))
+    mats = planes[trip]
+    ok = np.abs(np.linalg.det(mats)) > 1e-9
+    x = np.linalg.solve(mats[ok], np.ones((int(ok.sum()), 3, 1)))[..., 0]
+    inside = np.all(x @ planes.T <= 1.0 + 1e-9, axis=1)
+    return a, float(np.linalg.norm(x[inside], axis=1).max())
 
 
 def hand_data(
@@ -374,6 +416,28 @@ class ExactProblem:
             for e, dvec in enumerate(dirs):  # dvec . c_t - rhs c_n <= 0
                 idx = [int(self.c[i, 0])] + [int(x) for x in self.c[i, 1:]]
                 M.add_constraint(idx, [-rhs, *dvec.tolist()], "<=", 0.0, f"cone{i}.{e}")
+
+    def limit_motion(self, limit: MotionLimit) -> None:
+        """The object's motion within ``limit`` (module docstring, "Motion limit"): rows
+        ``|a_j . (v + omega x p)| <= shift / rho`` and ``|a_j . omega| <= turn / rho`` in the
+        directions of :func:`ball_directions` (planar: ``|theta| <= turn``)."""
+        g, M = self.grasp, self.model
+        a, rho = ball_directions(g.dim)
+        p = np.asarray(limit.point, dtype=float)
+        k = g.dim
+        if math.isfinite(limit.shift):
+            for j, aj in enumerate(a):
+                # a . (omega x p) = omega . (p x a); planar: theta (a_y p_x - a_x p_y)
+                rot = [aj[1] * p[0] - aj[0] * p[1]] if g.planar else np.cross(p, aj)
+                idx, val = self.extend([], [], self.r, np.r_[aj, rot])
+                M.add_row(idx, val, -limit.shift / rho, limit.shift / rho, f"shift{j}")
+        if math.isfinite(limit.turn):
+            if g.planar:
+                M.add_row([int(self.r[2])], [1.0], -limit.turn, limit.turn, "turn")
+                return
+            for j, aj in enumerate(a):
+                idx, val = self.extend([], [], self.r[k:], aj)
+                M.add_row(idx, val, -limit.turn / rho, limit.turn / rho, f"turn{j}")
 
     # ------------------------------------------------------------------ object wrench
 

@@ -19,7 +19,14 @@ from numpy.typing import NDArray
 from ..errors import GraspError
 from ..grasp import Grasp
 from ..mip import INF
-from ..queries import Existence, OptimalCommands, checked_base, checked_direction_cap
+from ..queries import (
+    Existence,
+    MotionLimit,
+    OptimalCommands,
+    checked_base,
+    checked_direction_cap,
+    checked_motion_limit,
+)
 from .problem import ExactPoint, ExactProblem, actuator_vector, hand_data, scale_bounds
 
 __all__ = ["QueryData", "add_query", "query_value"]
@@ -31,7 +38,8 @@ class QueryData:
     ``cap`` (MaxDisturbance, with ``base`` the wrench always applied), ``preload`` (m,),
     ``hand`` ``(R, f_c)``; for OptimalCommands also ``command_range`` ``(lower, upper)``
     per actuator, ``objective`` (``"max"`` or ``"weighted"``), ``weights`` and
-    ``max_normal_force``."""
+    ``max_normal_force``; ``motion_limit`` the validated :class:`MotionLimit` (Existence,
+    MaxDisturbance) or None."""
 
     wrench: NDArray[np.float64] | None
     direction: NDArray[np.float64] | None
@@ -43,6 +51,7 @@ class QueryData:
     objective: str | None = None
     weights: NDArray[np.float64] | None = None
     max_normal_force: float | None = None
+    motion_limit: MotionLimit | None = None
 
     @property
     def wrench_max(self) -> NDArray[np.float64]:
@@ -62,10 +71,11 @@ class QueryData:
             return cls._optimal_commands(grasp, query, bound_factor)
         preload = grasp.per_contact(query.preload, "preload")
         hand = hand_data(grasp, query.commands)
+        limit = checked_motion_limit(grasp, query)
         if isinstance(query, Existence):
-            return cls(grasp.wrench(query.wrench), None, 0.0, preload, hand)
+            return cls(grasp.wrench(query.wrench), None, 0.0, preload, hand, motion_limit=limit)
         d, cap = checked_direction_cap(grasp, query)
-        return cls(None, d, cap, preload, hand, checked_base(grasp, query))
+        return cls(None, d, cap, preload, hand, checked_base(grasp, query), motion_limit=limit)
 
     @classmethod
     def _optimal_commands(
@@ -110,11 +120,13 @@ def _per_actuator(v: Any, a: int, name: str, default: float) -> NDArray[np.float
 
 
 def add_query(prob: ExactProblem, data: QueryData) -> int | None:
-    """Object equilibrium and the query's objective on ``prob``: the index of ``s``
-    (MaxDisturbance), of the largest command (OptimalCommands "max"), -1 (OptimalCommands
-    "weighted": the objective is ``weights . f_c``) or None (Existence)."""
+    """Object equilibrium, the query's motion limit and its objective on ``prob``: the index
+    of ``s`` (MaxDisturbance), of the largest command (OptimalCommands "max"), -1
+    (OptimalCommands "weighted": the objective is ``weights . f_c``) or None (Existence)."""
     M = prob.model
     var = None
+    if data.motion_limit is not None:
+        prob.limit_motion(data.motion_limit)
     if data.direction is not None:
         base = 0.0 * data.direction if data.base is None else data.base
         var = prob.add_object_equilibrium(base, data.direction, data.cap)

@@ -21,7 +21,8 @@ from .problem import ExactBounds, ExactPoint, ExactProblem
 # the model_residuals keys every exact-model method enforces (not max_dissipation)
 HAND_CONDITIONS = ("hand_equilibrium", "actuator_command", "nonbackdrivable",
                    "actuator_complementarity")  # fmt: skip
-CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS)
+CONDITIONS = ("equilibrium", "normal_sign", "friction_cone", "spring_law", *HAND_CONDITIONS,
+              "motion_limit")  # fmt: skip
 
 
 # The faster backend per method in ``python -m stability.bench mip`` (docs/bench/stability.md):

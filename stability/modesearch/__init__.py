@@ -303,6 +303,7 @@ def _answer(grasp: Grasp, query: Any, stats: dict[str, Any], ex: CoulombModel,
     options=ModeSearchOptions,
     hand=True,
     compliance=True,
+    motion_limit=True,
     summary="Coulomb friction with maximum dissipation by one branch-and-bound tree over "
     "contact modes and slide arcs, one LP per node (exact points, proven brackets)",
 )

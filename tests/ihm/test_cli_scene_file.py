@@ -113,6 +113,38 @@ def test_map_a_file_scene_sim_and_model_agree(gripper: Path, tmp_path: Path, cap
         assert got["modesearch"][angle][0] == pytest.approx(got["sim"][angle][0], rel=0.15)
 
 
+def _map_csv(path: Path) -> dict[float, tuple[float, bool]]:
+    with path.open() as f:
+        return {float(r["angle_deg"]): (float(r["force_N"]), r["capped"] == "1")
+                for r in csv.DictReader(f) if r["method"] == "modesearch"}  # fmt: skip
+
+
+def test_map_with_mujocos_stiffness_and_a_motion_limit(gripper: Path, tmp_path: Path,
+                                                       capsys) -> None:  # fmt: skip
+    """``--compliance mujoco``: the servos are springs of 5000 N/m, so a push into a finger
+    moves the box by ``s / 2 kp`` (one servo pushed back, the other relieved): the 10 N cap
+    within the default 2 mm (the simulated ramp's), not within 0.5 mm (at most
+    ``2 kp 0.5 mm = 5 N``, less the contacts' own give)."""
+    base = ["map", str(gripper), "--object", "parcel", "--plane", "xz", "--directions", "4",
+            "--no-progress", "--compliance", "mujoco"]  # fmt: skip
+    rc = main([*base, "--method", "sim", "modesearch", "--out", str(tmp_path / "a")])
+    text = capsys.readouterr()
+    assert rc == 0, text.err
+    assert "100% of 4 directions agree" in text.out
+    free = _map_csv(tmp_path / "a" / "gripper_xz.csv")
+    assert free[0.0] == (pytest.approx(10.0), True)
+    rc = main([*base, "--method", "modesearch", "--motion-limit", "0.0005", "0.05",
+               "--out", str(tmp_path / "b")])  # fmt: skip
+    assert rc == 0, capsys.readouterr().err
+    tight = _map_csv(tmp_path / "b" / "gripper_xz.csv")
+    for push in (0.0, 180.0):
+        assert not tight[push][1] and 2.0 < tight[push][0] <= 5.0 + 1e-6
+    for angle in (90.0, 270.0):  # friction: held with no motion, whatever the limit
+        assert tight[angle][0] == pytest.approx(free[angle][0], rel=1e-6)
+    assert main([*base[:-2], "--motion-limit", "0.001", "0.05"]) == 2
+    _one_error_line(capsys, "needs compliance 'mujoco'")
+
+
 def test_sim_map_of_a_relative_path_on_workers(gripper: Path, monkeypatch) -> None:
     monkeypatch.chdir(gripper.parent)
     spec = MapSpec("gripper.xml", "xz", 2, object_body="parcel")
