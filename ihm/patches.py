@@ -120,11 +120,13 @@ def _wrench_map(pts: NDArray[np.float64], centre: NDArray[np.float64]) -> NDArra
     )
 
 
-def _line_patch(p: list[ContactGroup]) -> list[ContactGroup] | None:
+def _line_patch(p: list[ContactGroup], wide: bool = False) -> list[ContactGroup] | None:
     """A patch as two contacts on the line through its centre of pressure along its longest
     extent, at the patch's boundary (its points' convex hull), forces carrying the patch's
     whole wrench (exact for coplanar points: about the centre of pressure the normal forces
-    have no in-plane moment). None for a patch whose points are collinear or unloaded."""
+    have no in-plane moment). None for a patch whose points are collinear or unloaded.
+    ``wide``: each end split across the line where the hull ends on either side (four
+    points; ``reduce="rect"``), its force and stiffness by the lever rule."""
     from scipy.spatial import ConvexHull, QhullError
 
     frame = p[0].frame
@@ -160,9 +162,32 @@ def _line_patch(p: list[ContactGroup]) -> list[ContactGroup] | None:
     ids = [i for g in p for i in g.ids]
     mu = min(g.mu for g in p)
     k_ends = _lever_split(np.array([g.stiffness for g in p]), along, s_lo, s_hi)
-    return [replace(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
+    line = [replace(p[0], pos=[ends[k]], ids=list(ids) if k == 0 else [], mu=mu,
                     force_world=f[3 * k : 3 * k + 3], stiffness=k_ends[k])
             for k in range(2)]  # fmt: skip
+    if not wide or sv[1] <= THIN_PATCH_M * np.sqrt(len(Y)):
+        return line
+    # each end split across the line, to where the patch's hull ends on either side, by
+    # the lever rule (the end's force and stiffness, and so the patch's wrench, kept)
+    v2 = vt[1]
+    v3 = v2 @ frame[1:]
+    out = []
+    for k, e in enumerate(line):
+        ce = c2 + (s_lo if k == 0 else s_hi) * u2
+        av, slack = a @ v2, -(a @ ce + b)
+        side = slack > 1e-9  # not the face the end lies on
+        up, dn = side & (av > 1e-12), side & (av < -1e-12)
+        w_hi = float(np.min(slack[up] / av[up])) if up.any() else 0.0
+        w_lo = float(np.max(slack[dn] / av[dn])) if dn.any() else 0.0
+        if min(w_hi, -w_lo) <= THIN_PATCH_M:  # an end at a corner: kept as it is
+            out.append(e)
+            continue
+        share = (-w_lo) / (w_hi - w_lo)  # of the end's load at w_hi
+        for w, frac, first in ((w_lo, 1 - share, True), (w_hi, share, False)):
+            out.append(replace(e, pos=[e.pos[0] + w * v3], ids=list(e.ids) if first else [],
+                               force_world=frac * e.force_world,
+                               stiffness=frac * e.stiffness))  # fmt: skip
+    return out
 
 
 def _lever_split(k: NDArray[np.float64], s: NDArray[np.float64], s_lo: float,
@@ -191,12 +216,12 @@ def reduce_patches(groups: list[ContactGroup], keep: int) -> list[ContactGroup]:
             patches.append([g])
     out = []
     for p in patches:
-        if keep == 0 and len(p) > 2:
-            line = _line_patch(p)
+        if keep <= 0 and len(p) > 2:
+            line = _line_patch(p, wide=keep < 0)
             if line is not None:
                 out.extend(line)
                 continue
-        n_keep = 2 if keep == 0 else keep
+        n_keep = 2 if keep <= 0 else keep
         if len(p) <= n_keep:
             out.extend(p)
             continue

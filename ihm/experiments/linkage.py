@@ -54,6 +54,7 @@ CONTACT_SETS: dict[str, dict[str, Any]] = {
     "extremes3": {"reduce": "extremes", "patch_points": 3},
     "merged": {},
     "line, mujoco": {"reduce": "line", "compliance": "mujoco"},
+    "rect, mujoco": {"reduce": "rect", "compliance": "mujoco"},
 }
 
 
@@ -127,7 +128,7 @@ def simulate(direction: str, impratio: float | None = None) -> dict[str, Any]:
 def linkage_box(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     """Run the experiment (module docstring); ``quick`` uses the line set only."""
     rows: list[dict[str, Any]] = []
-    sets = ["line", "line, mujoco"] if quick else list(CONTACT_SETS)
+    sets = ["line", "line, mujoco", "rect, mujoco"] if quick else list(CONTACT_SETS)
     sim: dict[tuple[str, float], float] = {}
     for imp in (None, 10.0):
         for dname in DIRECTIONS:

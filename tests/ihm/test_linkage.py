@@ -134,14 +134,15 @@ def test_merged_seam_contacts_sum_mujocos_forces(settled):
     assert g.m == data.ncon - len(merged)
 
 
-@pytest.mark.parametrize("opts", [{"reduce": "line"}, {"reduce": "extremes", "patch_points": 3}])
+@pytest.mark.parametrize("opts", [{"reduce": "line"}, {"reduce": "rect"},
+                                  {"reduce": "extremes", "patch_points": 3}])  # fmt: skip
 def test_reduced_patches_keep_the_patch_wrench(settled, opts):
     """A reduced pad patch carries the same wrench as MuJoCo's points: both equilibria
     still hold with the reduced forces (line: 2 points per pad through the centre of
     pressure; extremes: 3 of MuJoCo's points per pad)."""
     model, data, g = settled
     gr = grasp_from_mujoco(model, data, **opts)
-    assert gr.m == {"line": 4, "extremes": 6}[opts["reduce"]]
+    assert gr.m == {"line": 4, "rect": 8, "extremes": 6}[opts["reduce"]]
     load = np.abs(g.forces).max()
     assert np.allclose(gr.forces_world().sum(axis=0), g.forces_world().sum(axis=0), atol=1e-9)
     assert gr.hand_residual < 1e-6
@@ -150,6 +151,8 @@ def test_reduced_patches_keep_the_patch_wrench(settled, opts):
     mom = np.cross(gr.points, gr.forces_world() @ gr.object_mat).sum(axis=0)
     ref = np.cross(g.points, g.forces_world() @ g.object_mat).sum(axis=0)
     assert np.allclose(mom, ref, atol=1e-6 * load * 0.03)
+    if opts["reduce"] == "rect":  # the pads' corners (x = +-11 mm, z = +-15 mm)
+        assert np.allclose(np.abs(gr.points[:, [0, 2]]), [0.011, 0.015], atol=2e-7)
     if opts["reduce"] == "line":  # each pad's two points lie on its patch, on one line
         for body in np.unique(gr.hand_bodies):
             full = g.points_world()[g.hand_bodies == body]
@@ -332,3 +335,21 @@ def test_spring_held_motion_is_refused_by_name():
         g = grasp_from_mujoco(model, data, hand=HandOptions(spring_held="warn"))
     k = g.actuator_names.index("spring:rslide")
     assert g.backdrivable[k] and g.hand_residual < 1e-3
+
+
+def test_rect_reduction_with_mujocos_stiffness_matches_the_push_along_x():
+    """With MuJoCo's stiffness and preload each pad's centre of pressure is 0.45 mm above
+    the box centre, so the friction of a push along x, saturated, turns the box about y;
+    MuJoCo's patch balances that with torsion about the pad normals (z friction at x =
+    +-11 mm). The line (points at x = 0) cannot: its answer is the lower points' friction,
+    4 x 0.7 x 10.42 N = 29.16 N. The rect reduction keeps the lever: MuJoCo's 30.03 N."""
+    from ihm.sim_maps import scene_disturbance
+
+    model, data = load_scene(SCENE)
+    out = {}
+    for red in ("line", "rect"):
+        g = grasp_from_mujoco(model, data, reduce=red, compliance="mujoco")
+        q = scene_disturbance(g, np.r_[g.object_mat.T @ [1.0, 0, 0], 0, 0, 0], g.commands, 100.0)
+        out[red] = solve(g, q, method="modesearch", time_limit=5).value
+    assert out["line"] == pytest.approx(4 * 0.7 * 10.4156, rel=1e-3)
+    assert out["rect"] == pytest.approx(30.03, rel=0.01)
