@@ -3,7 +3,9 @@
 Wrenches are ``(fx, fy, tz)`` for planar grasps and ``(fx, fy, fz, tx, ty, tz)``
 for spatial ones, applied to the object about the object-frame origin, in N and
 N m. A preload ``p_i >= 0`` [N] pre-stresses the unit virtual spring at contact
-``i``: ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance). ``commands``
+``i``: ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance). The 3D methods also take
+``p_i < 0``, a gap (our extension): the contact closes only after the object has moved
+``-p_i / k_i`` towards it (``d_n <= p_i / k_i``); ``planar`` and ``gws`` refuse it. ``commands``
 are actuator forces for hands with a transmission ``R`` (chapter 5). ``motion_limit``
 (:class:`MotionLimit`, our extension) asks for an equilibrium whose object motion stays
 within a bound, as a simulated ramp stops at a set displacement.
@@ -41,12 +43,15 @@ class MotionLimit:
     ``shift`` is in m and ``turn`` in rad, as a simulator's stop rule; with the thesis' unit
     springs a motion is measured in newtons of spring force. ``point`` (object frame, default
     the origin) is where the displacement is measured, e.g. the centre of mass. ``inf``
-    leaves a part free. Our extension of the thesis' model (module
+    leaves a part free. ``open`` (optional, (m,) booleans): contacts that must stay open,
+    ``c_n = 0`` and so ``k d_n >= p`` (a simulator's stop on a new contact: a gapped contact,
+    preload ``p < 0``, that may not close). Our extension of the thesis' model (module
     :mod:`stability.model.problem`, "motion limit")."""
 
     shift: float = math.inf
     turn: float = math.inf
     point: ArrayLike | None = None
+    open: ArrayLike | None = None
 
 
 @dataclass(frozen=True)
@@ -131,8 +136,9 @@ def checked_base(grasp, query: MaxDisturbance) -> NDArray[np.float64]:
 
 def checked_motion_limit(grasp, query: Query) -> MotionLimit | None:
     """The query's :class:`MotionLimit` validated (``shift``, ``turn`` > 0 or inf, ``point``
-    a finite point of the grasp's dimension, returned as an array), or None when it has
-    none; :class:`GraspError` otherwise."""
+    a finite point of the grasp's dimension, returned as an array; ``open`` (m,) booleans,
+    returned as an array, all False when not given), or None when it has none;
+    :class:`GraspError` otherwise."""
     lim = getattr(query, "motion_limit", None)
     if lim is None:
         return None
@@ -148,4 +154,11 @@ def checked_motion_limit(grasp, query: Query) -> MotionLimit | None:
     if point.shape != (grasp.dim,) or not np.all(np.isfinite(point)):
         raise GraspError(f"MotionLimit point must be {grasp.dim} finite numbers (object "
                          f"frame), got {lim.point!r}")  # fmt: skip
-    return MotionLimit(shift, turn, point)
+    if lim.open is None:
+        keep = np.zeros(grasp.m, dtype=bool)
+    else:
+        keep = np.asarray(lim.open)
+        if keep.shape != (grasp.m,) or keep.dtype != bool:
+            raise GraspError(f"MotionLimit open must be {grasp.m} booleans (one per contact), "
+                             f"got {lim.open!r}")  # fmt: skip
+    return MotionLimit(shift, turn, point, keep.copy())

@@ -342,8 +342,10 @@ class Solution:
         """Violation of each model condition by the returned forces and motion.
 
         See :func:`model_residuals`; with a query's motion limit also ``motion_limit``
-        (:func:`motion_excess`). Methods without a passive model
-        (``gws``) return no motion, so only equilibrium and cone terms appear.
+        (:func:`motion_excess`, and at the contacts the limit keeps open the larger of
+        ``|c_n|`` [N] and ``max(0, p - k d_n)`` [N], the spring's push were it closed).
+        Methods without a passive model (``gws``) return no motion, so only equilibrium and
+        cone terms appear.
         Raises ``ValueError`` when there is no solution to check.
         """
         if self.forces is None:
@@ -351,13 +353,13 @@ class Solution:
         q = self.query
         preload = commands = None
         if isinstance(q, Existence | MaxDisturbance) and self.motion is not None:
-            preload = self.grasp.per_contact(q.preload, "preload")
+            preload = self.grasp.per_contact(q.preload, "preload", nonneg=False)
         if isinstance(q, Existence | MaxDisturbance) and q.commands is not None:
             commands = np.asarray(q.commands, dtype=float)
         if self.commands is not None:  # OptimalCommands: the commands found
             commands = self.commands
         if not isinstance(q, Existence | MaxDisturbance) and self.motion is not None:
-            preload = self.grasp.per_contact(q.preload, "preload")
+            preload = self.grasp.per_contact(q.preload, "preload", nonneg=False)
         res = model_residuals(
             self.grasp,
             self.wrench,
@@ -372,6 +374,13 @@ class Solution:
         limit = checked_motion_limit(self.grasp, q)
         if limit is not None and self.motion is not None:
             res["motion_limit"] = motion_excess(self.grasp, limit, self.motion)
+            if np.any(limit.open):  # a contact kept open: c_n = 0 and k d_n >= p
+                d = self.grasp.contact_motion(self.motion, self.hand_motion)[limit.open, 0]
+                k = self.grasp.stiffness[limit.open]
+                cn = np.asarray(self.forces, dtype=float).reshape(self.grasp.m, -1)[:, 0]
+                closing = np.maximum(0.0, preload[limit.open] - k * d)
+                worst = max(float(np.max(np.abs(cn[limit.open]))), float(np.max(closing)))
+                res["motion_limit"] = max(res["motion_limit"], worst)
         return res
 
     def max_residual(

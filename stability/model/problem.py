@@ -15,7 +15,9 @@ displacement is measured in newtons):
   (``Grasp.stiffness``, 1 in the thesis);
 * ``y`` per contact (eq. binary_contact): ``y = 1`` (closed) ``=> u = 0``, so
   ``c_n = p - k d_n >= 0``; ``y = 0`` (open) ``=> c_n = 0``, so ``k d_n >= p``. Together:
-  ``c_n = max(0, p - k d_n)`` (thesis eq. normal_compliance with preload ``p``);
+  ``c_n = max(0, p - k d_n)`` (thesis eq. normal_compliance with preload ``p``). A
+  negative ``p`` is a gap (our extension): the contact closes once it has moved ``-p / k``
+  towards the object, ``d_n <= p / k``; the rows are the same;
 * hands (``J`` given; ``R`` defaults to the identity): joint motion ``q`` (free),
   actuator forces ``f in [f_c, f_c + E]``, transmission motion ``v = R^T (q - q_ref) in
   [0, V]`` (eq. underac_nonbackdrive; ``q_ref = 0`` unless a preload state is given),
@@ -37,7 +39,8 @@ the displacement of a point ``p`` of the object, ``v + omega x p``, and the rota
 ``|a_j . x| <= radius / rho`` (:func:`ball_directions`: 31 directions of the icosahedral
 group, ``rho = 1.0705``; planar: 8 directions of a 16-gon and ``|theta| <= turn``), so that
 every answer honours the Euclidean limit and reaches at least ``1 / rho`` of it in every
-direction.
+direction. Contacts the limit keeps open (``MotionLimit.open``) get the row ``c_n <= 0``:
+with ``u >= 0`` their spring law leaves ``k d_n >= p`` (a gap that does not close).
 
 The bounds ``B, V, E`` are not arbitrary big-M constants: :func:`scale_bounds` derives
 them from the query's own force scale (the largest applied force or torque / size,
@@ -174,7 +177,7 @@ def scale_bounds(
 ) -> ExactBounds:
     """Bounds from the problem's own scale (see the module docstring).
 
-    ``S = max(|w_force|, |w_torque| / L, max p, max_j |(R f_c)_j| / |J_j|)`` with
+    ``S = max(|w_force|, |w_torque| / L, max |p|, max_j |(R f_c)_j| / |J_j|)`` with
     ``wrench_max`` the largest wrench the query applies (``cap * direction`` for
     MaxDisturbance) and ``|J_j|`` the norm of joint ``j``'s column (the contact force that
     balances the commanded torque through that joint's lever). ``B = bound_factor * S``
@@ -190,7 +193,7 @@ def scale_bounds(
     L = length_scale(grasp)
     k = 2 if grasp.planar else 3
     w = np.abs(wrench_max)
-    S = max(float(w[:k].max()), float(w[k:].max()) / L, float(np.max(preload, initial=0.0)))
+    S = max(float(w[:k].max()), float(w[k:].max()) / L, float(np.max(np.abs(preload), initial=0.0)))
     if hand is not None:
         R, fc = hand
         cols = np.linalg.norm(grasp.J, axis=0)
@@ -285,7 +288,7 @@ class ExactProblem:
     grasp : Grasp
         Planar or spatial; a rigid fixture (``J is None``) or a hand (``J``, ``R``).
     preload : (m,) array
-        Spring preloads ``p >= 0`` [N].
+        Spring preloads ``p`` [N]; ``p < 0`` is a gap of ``-p / k`` (module docstring).
     hand : (R, f_c) or None
         From :func:`hand_data`.
     bounds : ExactBounds
@@ -420,8 +423,12 @@ class ExactProblem:
     def limit_motion(self, limit: MotionLimit) -> None:
         """The object's motion within ``limit`` (module docstring, "Motion limit"): rows
         ``|a_j . (v + omega x p)| <= shift / rho`` and ``|a_j . omega| <= turn / rho`` in the
-        directions of :func:`ball_directions` (planar: ``|theta| <= turn``)."""
+        directions of :func:`ball_directions` (planar: ``|theta| <= turn``); ``c_n <= 0`` at
+        the contacts of ``limit.open``."""
         g, M = self.grasp, self.model
+        if limit.open is not None:
+            for i in np.flatnonzero(limit.open):
+                M.add_row([int(self.c[i, 0])], [1.0], -INF, 0.0, f"stay_open{i}")
         a, rho = ball_directions(g.dim)
         p = np.asarray(limit.point, dtype=float)
         k = g.dim

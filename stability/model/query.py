@@ -69,7 +69,7 @@ class QueryData:
         excess bound of :func:`~stability.model.problem.scale_bounds` at this factor."""
         if isinstance(query, OptimalCommands):
             return cls._optimal_commands(grasp, query, bound_factor)
-        preload = grasp.per_contact(query.preload, "preload")
+        preload = grasp.per_contact(query.preload, "preload", nonneg=False)  # < 0: a gap
         hand = hand_data(grasp, query.commands)
         limit = checked_motion_limit(grasp, query)
         if isinstance(query, Existence):
@@ -84,7 +84,7 @@ class QueryData:
         if grasp.J is None:
             raise GraspError("OptimalCommands needs a hand: set J (and R) on the Grasp")
         wrench = grasp.wrench(query.wrench)
-        preload = grasp.per_contact(query.preload, "preload")
+        preload = grasp.per_contact(query.preload, "preload", nonneg=False)  # < 0: a gap
         R, _ = hand_data(grasp, None)
         a = R.shape[1]
         lower = _per_actuator(query.lower, a, "lower", 0.0)

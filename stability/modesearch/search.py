@@ -134,9 +134,16 @@ class Search:
     def stuck(self) -> None:
         """A first exact point: every contact closed and sticking (friction in the inscribed
         octagon), every nonbackdrivable actuator locked; one node LP. The incumbent when it
-        has one (a grasp that holds without slipping needs no tree to say "stable")."""
+        has one (a grasp that holds without slipping needs no tree to say "stable").
+        Contacts at a gap (preload ``p < 0``) or kept open by the motion limit are open
+        here: closed, a gapped contact would have to have crossed its gap."""
         lp = self.lp
-        node = (("C",) * lp.m, (("S", None),) * lp.m, ("L",) * len(lp.act))
+        shut = self.data.preload < 0
+        if self.data.motion_limit is not None:
+            shut = shut | self.data.motion_limit.open
+        normal = tuple("O" if s else "C" for s in shut)
+        tan = tuple(("U", None) if s else ("S", None) for s in shut)
+        node = (normal, tan, ("L",) * len(lp.act))
         lp.inscribe(True)
         try:
             res = lp.solve(node)
