@@ -93,6 +93,7 @@ from .handmodel import (
     hand_model,
     transmission,
 )
+from .near import near_contacts
 from .patches import ContactGroup, merge_contacts, reduce_patches
 
 __all__ = [
@@ -150,6 +151,8 @@ class MujocoSource:
         rotation (columns the object's axes)
     object_com : (3,) the object body's centre of mass in the object frame [m] (the point
         whose displacement :mod:`ihm.resistance` measures)
+    gaps : (m,) per contact how far it is from engaging [m]: 0 for a touching contact, the
+        gap of a near contact (``grasp_from_mujoco(near=)``, :mod:`ihm.near`)
     """
 
     forces: NDArray[np.float64]
@@ -163,6 +166,7 @@ class MujocoSource:
     object_pos: NDArray[np.float64]
     object_mat: NDArray[np.float64]
     object_com: NDArray[np.float64]
+    gaps: NDArray[np.float64] | None = None
 
 
 class _FromSource:
@@ -207,6 +211,7 @@ class SceneGrasp(Grasp):
     object_pos = _FromSource()
     object_mat = _FromSource()
     object_com = _FromSource()
+    gaps = _FromSource()
 
     def __init__(self, *, source: MujocoSource, **grasp: Any) -> None:
         """``grasp``: :class:`stability.Grasp`'s arguments; ``source``: the MuJoCo record."""
@@ -422,6 +427,7 @@ def grasp_from_mujoco(
     hand: HandOptions | None = None,
     hand_rtol: float = 0.02,
     compliance: str = "unit",
+    near: float = 0.0,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
 
@@ -445,7 +451,11 @@ def grasp_from_mujoco(
     raises, naming what the model leaves out. Unmodelled elements warn
     (:class:`HandModelWarning`). ``compliance``: ``"unit"`` (default; the thesis' unit
     springs, rigid actuators and stops) or ``"mujoco"`` (MuJoCo's contact, servo and
-    spring stiffness and the limits' gaps in physical units: module docstring).
+    spring stiffness and the limits' gaps in physical units: module docstring). ``near``
+    [m] (``compliance="mujoco"`` only; default 0, none): pairs of a hand geom and an object
+    geom closer than ``near`` but not touching become contacts too, with force 0, MuJoCo's
+    stiffness of the pair as it engages and their gap in ``grasp.gaps``
+    (:mod:`ihm.near`); they come after the touching contacts.
 
     Raises
     ------
@@ -467,6 +477,11 @@ def grasp_from_mujoco(
         raise GraspError(f"hand_rtol must be a finite number > 0, got {hand_rtol!r}")
     if compliance not in ("unit", "mujoco"):
         raise GraspError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
+    if not (isinstance(near, (int, float)) and np.isfinite(near) and near >= 0):
+        raise GraspError(f"near must be a finite number >= 0 [m], got {near!r}")
+    if near > 0 and compliance != "mujoco":
+        raise GraspError("near contacts need compliance='mujoco': a gap in metres has no "
+                         "meaning for the thesis' unit springs")  # fmt: skip
     mj = compliance == "mujoco"
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
@@ -482,6 +497,16 @@ def grasp_from_mujoco(
         )
     if reduce is not None:
         groups = reduce_patches(groups, {"line": 0, "rect": -1}.get(reduce, patch_points))
+    gaps = np.zeros(len(groups))
+    if near > 0:
+        in_obj_geom = in_obj[model.geom_bodyid].tolist()
+        touching = set()
+        for i, hand_geom, obj_first in object_contact_ids(data, in_obj_geom):
+            con = data.contact[i]
+            touching.add((int(hand_geom), int(con.geom1 if obj_first else con.geom2)))
+        extra, extra_gaps = near_contacts(model, data, in_obj, touching, float(near), mj)
+        groups = groups + extra
+        gaps = np.r_[gaps, extra_gaps]
 
     ho = HandOptions() if hand is None else hand
     hm = hand_model(model, data, in_obj, backdrivable=ho.backdrivable, servo=ho.servo,
@@ -516,6 +541,7 @@ def grasp_from_mujoco(
         object_pos=x_o,
         object_mat=R_o,
         object_com=R_o.T @ (data.xipos[obj] - x_o),
+        gaps=gaps,
     )
     physical = (dict(stiffness=[g.stiffness for g in groups], actuator_stiffness=hm.stiffness,
                      stop_gap=hm.gaps) if mj else {})  # fmt: skip
