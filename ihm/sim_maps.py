@@ -86,7 +86,9 @@ class MapSpec:
     start preloaded with the settled forces: :func:`scene_disturbance`); ``motion_limit``:
     ``(shift [m], turn [rad])``, with ``"mujoco"`` the stability methods' answers keep the
     object's centre of mass within ``shift`` and its rotation within ``turn`` of the settled
-    state (None: the simulated ramp's 2 mm and 0.05 rad, :func:`scene_disturbance`)."""
+    state (None: the simulated ramp's 2 mm and 0.05 rad, :func:`scene_disturbance`);
+    ``near`` [m]: with ``"mujoco"``, hand geoms this close to the object that do not touch it
+    become contacts at their gap (:mod:`ihm.near`; 0: none)."""
 
     scene: str
     plane: str = "xy"
@@ -100,6 +102,7 @@ class MapSpec:
     object_body: str = "object"
     compliance: str = "unit"
     motion_limit: tuple[float, float] | None = None
+    near: float = 0.0
 
     def check(self, method: str, workers: int = 1) -> None:
         """:func:`check_options` on this map, for ``method`` on ``workers`` processes, and its
@@ -114,6 +117,10 @@ class MapSpec:
         if lim is not None and self.compliance != "mujoco":
             raise MapError("motion_limit is in metres and radians: it needs compliance "
                            "'mujoco' (the unit model measures motion in newtons)")  # fmt: skip
+        if not (np.isfinite(self.near) and self.near >= 0):
+            raise MapError(f"near must be a finite number >= 0 [m], got {self.near!r}")
+        if self.near > 0 and self.compliance != "mujoco":
+            raise MapError("near is a distance in metres: it needs compliance 'mujoco'")
 
     @property
     def label(self) -> str:
@@ -364,7 +371,8 @@ def _settled_grasp(spec: MapSpec) -> tuple[Any, np.ndarray, np.ndarray]:
     model, data = loaded
     if loaded.ratchet is not None:
         loaded.ratchet.release()
-    grasp = grasp_from_mujoco(model, data, spec.object_body, compliance=spec.compliance)
+    grasp = grasp_from_mujoco(model, data, spec.object_body, compliance=spec.compliance,
+                              near=float(spec.near))  # fmt: skip
     commands = loaded.commands
     if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
         commands = grasp.full_commands(commands)
