@@ -153,6 +153,7 @@ class MujocoSource:
         whose displacement :mod:`ihm.resistance` measures)
     gaps : (m,) per contact how far it is from engaging [m]: 0 for a touching contact, the
         gap of a near contact (``grasp_from_mujoco(near=)``, :mod:`ihm.near`)
+    near : (m,) booleans, True for a near contact (no MuJoCo contact behind it)
     """
 
     forces: NDArray[np.float64]
@@ -167,6 +168,7 @@ class MujocoSource:
     object_mat: NDArray[np.float64]
     object_com: NDArray[np.float64]
     gaps: NDArray[np.float64] | None = None
+    near: NDArray[np.bool_] | None = None
 
 
 class _FromSource:
@@ -212,6 +214,7 @@ class SceneGrasp(Grasp):
     object_mat = _FromSource()
     object_com = _FromSource()
     gaps = _FromSource()
+    near = _FromSource()
 
     def __init__(self, *, source: MujocoSource, **grasp: Any) -> None:
         """``grasp``: :class:`stability.Grasp`'s arguments; ``source``: the MuJoCo record."""
@@ -498,6 +501,7 @@ def grasp_from_mujoco(
     if reduce is not None:
         groups = reduce_patches(groups, {"line": 0, "rect": -1}.get(reduce, patch_points))
     gaps = np.zeros(len(groups))
+    n_near = 0
     if near > 0:
         in_obj_geom = in_obj[model.geom_bodyid].tolist()
         touching = set()
@@ -506,6 +510,7 @@ def grasp_from_mujoco(
             touching.add((int(hand_geom), int(con.geom1 if obj_first else con.geom2)))
         extra, extra_gaps = near_contacts(model, data, in_obj, touching, float(near), mj)
         groups = groups + extra
+        n_near = len(extra)
         gaps = np.r_[gaps, extra_gaps]
 
     ho = HandOptions() if hand is None else hand
@@ -542,6 +547,7 @@ def grasp_from_mujoco(
         object_mat=R_o,
         object_com=R_o.T @ (data.xipos[obj] - x_o),
         gaps=gaps,
+        near=np.arange(len(groups)) >= len(groups) - n_near,
     )
     physical = (dict(stiffness=[g.stiffness for g in groups], actuator_stiffness=hm.stiffness,
                      stop_gap=hm.gaps) if mj else {})  # fmt: skip

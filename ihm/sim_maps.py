@@ -301,19 +301,19 @@ def scene_disturbance(
     the simulated ramp's hard end (:func:`ramp_limit`: 2 mm, 0.05 rad), so that the model
     answers what the ramp measures; ``(inf, inf)``: free.
 
-    Near contacts (``grasp_from_mujoco(near=)``, :mod:`ihm.near`; no MuJoCo contact behind
-    them) start at their gap: preload ``-k g`` [N] (``k`` their stiffness, ``g`` their gap
-    [m]). Those of a body that touches the object nowhere at the settled state must stay
-    open (``MotionLimit.open``): the simulated ramp and hold end when the object touches a
-    body it did not touch at rest (``stop_on_new_contact``); those of a touching body may
+    Near contacts (``grasp_from_mujoco(near=)``, :mod:`ihm.near`; ``grasp.near``) start at
+    their gap: preload ``-k g`` [N] (``k`` their stiffness, ``g`` their gap [m]). Those of
+    a body that touches the object nowhere at the settled state must stay open
+    (``MotionLimit.open``): the simulated ramp and hold end when the object touches a body
+    it did not touch at rest (``stop_on_new_contact``); those of a touching body may
     close."""
     from stability import MaxDisturbance, MotionLimit
 
     preload = limit = None
     if grasp.compliant:
         preload = grasp.forces[:, 0].copy()
-        near = np.array([len(ids) == 0 for ids in grasp.contact_ids], dtype=bool)
-        if grasp.gaps is not None and np.any(near):
+        near = np.zeros(grasp.m, dtype=bool) if grasp.near is None else grasp.near
+        if np.any(near):
             preload[near] = -grasp.stiffness[near] * grasp.gaps[near]
         touching = set(grasp.hand_bodies[~near].tolist())
         new = near & np.array([b not in touching for b in grasp.hand_bodies.tolist()])

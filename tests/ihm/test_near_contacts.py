@@ -66,7 +66,7 @@ def test_near_contact_read_off() -> None:
     # for the pyramidal cone's R, which scales with mu^2 (1 + mu^2) (ihm.compliance)
     scale = (0.7**2 * (1 + 0.7**2)) / (0.9**2 * (1 + 0.9**2))
     assert g.stiffness[1] == pytest.approx(g.stiffness[0] * scale, rel=1e-6)
-    assert g.contact_ids[1] == []
+    assert g.contact_ids[1] == [] and g.near.tolist() == [False, True]
     # near=0: the grasp of before
     g00 = ihm.grasp_from_mujoco(model, data, compliance="mujoco", near=0.0)
     np.testing.assert_array_equal(g00.points, g0.points)
