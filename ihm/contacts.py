@@ -455,10 +455,10 @@ def grasp_from_mujoco(
     (:class:`HandModelWarning`). ``compliance``: ``"unit"`` (default; the thesis' unit
     springs, rigid actuators and stops) or ``"mujoco"`` (MuJoCo's contact, servo and
     spring stiffness and the limits' gaps in physical units: module docstring). ``near``
-    [m] (``compliance="mujoco"`` only; default 0, none): pairs of a hand geom and an object
-    geom closer than ``near`` but not touching become contacts too, with force 0, MuJoCo's
-    stiffness of the pair as it engages and their gap in ``grasp.gaps``
-    (:mod:`ihm.near`); they come after the touching contacts.
+    [m] (``compliance="mujoco"`` only; default 0, none): points of the hand within
+    ``near`` of the object that do not touch it yet (MuJoCo's collision with ``near`` more
+    margin) become contacts too, with force 0, MuJoCo's stiffness as they engage and their
+    gap in ``grasp.gaps`` (:mod:`ihm.near`); they come after the touching contacts.
 
     Raises
     ------
@@ -503,12 +503,7 @@ def grasp_from_mujoco(
     gaps = np.zeros(len(groups))
     n_near = 0
     if near > 0:
-        in_obj_geom = in_obj[model.geom_bodyid].tolist()
-        touching = set()
-        for i, hand_geom, obj_first in object_contact_ids(data, in_obj_geom):
-            con = data.contact[i]
-            touching.add((int(hand_geom), int(con.geom1 if obj_first else con.geom2)))
-        extra, extra_gaps = near_contacts(model, data, in_obj, touching, float(near), mj)
+        extra, extra_gaps = near_contacts(model, data, in_obj, float(near), mj, merge_tol)
         groups = groups + extra
         n_near = len(extra)
         gaps = np.r_[gaps, extra_gaps]

@@ -25,7 +25,7 @@ SCENE = """
     <body name="object" pos="0 0 0.0495">
       <freejoint/>
       <geom type="sphere" size="{r}" mass="0.4" friction="0.7 0.02 0.001" solref="0.02 1"
-            solimp="0.9 0.9 0.001 0.5 2"/>
+            solimp="0.9 0.9 0.001 0.5 2" margin="{margin}"/>
     </body>
   </worldbody>
 </mujoco>
@@ -34,10 +34,11 @@ WALL = """<geom name="wall" type="box" size="0.01 0.1 0.1" pos="{x} 0 0.05"
           friction="{mu} 0.02 0.001" solref="0.02 1" solimp="0.9 0.9 0.001 0.5 2"/>"""
 
 
-def _scene(own_body: bool, mu: float = 0.9):
+def _scene(own_body: bool, mu: float = 0.9, margin: float = 0.0):
     """Settled sphere; the wall 0.5 mm from its settled surface (+x), a world geom (the
-    floor's body) or its own static body."""
-    base = mujoco.MjModel.from_xml_string(SCENE.format(wall="", r=R))
+    floor's body) or its own static body; ``margin`` on the sphere (its contacts engage
+    that far out)."""
+    base = mujoco.MjModel.from_xml_string(SCENE.format(wall="", r=R, margin=margin))
     data = mujoco.MjData(base)
     for _ in range(1000):
         mujoco.mj_step(base, data)
@@ -45,7 +46,7 @@ def _scene(own_body: bool, mu: float = 0.9):
     wall = WALL.format(x=f"{x:.9f}", mu=mu)
     if own_body:
         wall = f'<body name="wall_body">{wall}</body>'
-    model = mujoco.MjModel.from_xml_string(SCENE.format(wall=wall, r=R))
+    model = mujoco.MjModel.from_xml_string(SCENE.format(wall=wall, r=R, margin=margin))
     d2 = mujoco.MjData(model)
     d2.qpos[:] = data.qpos
     mujoco.mj_forward(model, d2)
@@ -72,6 +73,15 @@ def test_near_contact_read_off() -> None:
     np.testing.assert_array_equal(g00.points, g0.points)
     np.testing.assert_array_equal(g00.stiffness, g0.stiffness)
     assert ihm.grasp_from_mujoco(model, data, compliance="mujoco", near=0.4e-3).m == 1
+
+
+def test_gap_beyond_the_objects_margin() -> None:
+    """A sphere with 0.2 mm margin engages the wall 0.2 mm out: the gap is 0.3 mm (MuJoCo
+    adds the two geoms' margins, which ihm.near relies on)."""
+    model, data = _scene(own_body=False, margin=0.2e-3)
+    g = ihm.grasp_from_mujoco(model, data, compliance="mujoco", near=1e-3)
+    assert g.near.tolist() == [False, True]
+    assert g.gaps[1] == pytest.approx(GAP - 0.2e-3, abs=1e-6)
 
 
 def test_near_refused_with_unit_springs() -> None:
