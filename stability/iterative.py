@@ -70,6 +70,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .api import register
+from .errors import MethodError
 from .grasp import Grasp
 from .model.problem import ExactBounds, ExactPoint, ExactProblem, length_scale, scale_bounds
 from .model.query import QueryData
@@ -234,6 +235,9 @@ class _Scheme:
 def _solve_iterative(grasp: Grasp, query: Existence | MaxDisturbance, opts: IterativeOptions,
                      deadline: Deadline) -> Solution:  # fmt: skip
     data = QueryData.of(grasp, query)
+    if np.any(data.preload < 0):
+        raise MethodError("iterative does not take a negative preload (a gap); use modesearch, "
+                          "refinement, exact or no_mdp")  # fmt: skip
     L = opts.length_scale or length_scale(grasp)
     bounds = scale_bounds(grasp, data.wrench_max, data.preload, data.hand, opts.bound_factor)
     stats: dict[str, Any] = {"backend": opts.backend, "length_scale": L}

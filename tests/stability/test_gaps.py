@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from stability import Existence, Grasp, GraspError, MaxDisturbance, MotionLimit, solve
+from stability import (
+    Existence,
+    Grasp,
+    GraspError,
+    MaxDisturbance,
+    MethodError,
+    MotionLimit,
+    solve,
+)
 from stability.model.problem import ball_directions
 
 METHODS = ("modesearch", "refinement", "exact", "no_mdp")
@@ -97,3 +105,8 @@ def test_planar_still_refuses_a_gap() -> None:
     g = Grasp([[-1, 0], [1, 0]], [[1, 0], [-1, 0]], mu=0.5)
     with pytest.raises(GraspError, match="preload must be >= 0"):
         solve(g, Existence([0, 0, 0], preload=-1.0), method="planar")
+
+
+def test_iterative_refuses_a_gap() -> None:
+    with pytest.raises(MethodError, match="negative preload"):
+        solve(_pinch3(), Existence(np.zeros(6), preload=[P, P, -1.0]), method="iterative")
