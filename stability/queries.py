@@ -1,14 +1,15 @@
 """Query types: what a solver is asked about a grasp.
 
-Wrenches are ``(fx, fy, tz)`` for planar grasps and ``(fx, fy, fz, tx, ty, tz)``
-for spatial ones, applied to the object about the object-frame origin, in N and
-N m. A preload ``p_i >= 0`` [N] pre-stresses the unit virtual spring at contact
-``i``: ``c_n = max(0, p - d_n)`` (thesis eq. normal_compliance). ``modesearch``,
-``refinement``, ``exact`` and ``no_mdp`` also take ``p_i < 0``, a gap (our extension): the
-contact closes only after the object has moved ``-p_i / k_i`` towards it (``d_n <= p_i /
-k_i``); ``planar``, ``gws`` and ``iterative`` refuse it. ``commands`` are actuator forces for hands with a transmission ``R`` (chapter 5). ``motion_limit``
-(:class:`MotionLimit`, our extension) asks for an equilibrium whose object motion stays
-within a bound, as a simulated ramp stops at a set displacement.
+Wrenches are ``(fx, fy, tz)`` for planar grasps and ``(fx, fy, fz, tx, ty, tz)`` for
+spatial ones, applied to the object about the object-frame origin, in N and N m. A
+preload ``p_i >= 0`` [N] pre-stresses the unit virtual spring at contact ``i``: ``c_n =
+max(0, p - d_n)`` (thesis eq. normal_compliance). ``modesearch``, ``refinement``,
+``exact`` and ``no_mdp`` also take ``p_i < 0``, a gap (our extension): the contact
+closes only after the object has moved ``-p_i / k_i`` towards it (``d_n <= p_i / k_i``);
+``planar``, ``gws`` and ``iterative`` refuse it. ``commands`` are actuator forces for
+hands with a transmission ``R`` (chapter 5). ``motion_limit`` (:class:`MotionLimit`, our
+extension) asks for an equilibrium whose object motion stays within a bound, as a
+simulated ramp stops at a set displacement.
 """
 
 from __future__ import annotations
