@@ -93,7 +93,7 @@ from .handmodel import (
     hand_model,
     transmission,
 )
-from .near import near_contacts
+from .near import near_contacts, widened
 from .patches import ContactGroup, merge_contacts, reduce_patches
 
 __all__ = [
@@ -503,7 +503,9 @@ def grasp_from_mujoco(
     gaps = np.zeros(len(groups))
     n_near = 0
     if near > 0:
-        extra, extra_gaps = near_contacts(model, data, in_obj, float(near), mj, merge_tol)
+        m2, d2 = widened(model, data, in_obj, float(near))
+        extra, extra_gaps = near_contacts(_read(m2, d2, in_obj, False), d2, float(near), mj,
+                                          merge_tol)  # fmt: skip
         groups = groups + extra
         n_near = len(extra)
         gaps = np.r_[gaps, extra_gaps]

@@ -13,9 +13,10 @@ is read from the original state); one pair can give a near contact beside a touc
 body within ``merge_tol`` and 1e-3 rad are merged (:func:`ihm.patches.merge_contacts`,
 the first one's gap kept).
 
-* point, frame, friction: MuJoCo's contact of the copy (its ``pos``, the frame turned so
-  that ``n`` points into the object, ``friction[0]`` as MuJoCo mixes it for the pair; 0 for
-  ``condim`` 1; ``condim > 3`` refused as for touching contacts);
+* point, frame, friction: MuJoCo's contact of the copy, read as a touching one
+  (:func:`ihm.grasp_from_mujoco`: its ``pos``, the frame turned so that ``n`` points into
+  the object, ``friction[0]`` as MuJoCo mixes it for the pair; 0 for ``condim`` 1;
+  ``condim > 3`` refused);
 * force 0; the hand Jacobian as a touching contact of that body;
 * stiffness (``compliance="mujoco"``): the slope at which the contact engages,
   ``K = sum_j k_j imp0 / R_j(imp0)`` over its rows with ``k_j > 0``, ``R_j(imp) = c_j (1 -
@@ -32,17 +33,16 @@ hand (``c_n = max(0, p - K d_n)``).
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from stability import GraspError
-
 from .compliance import contact_rows
 from .patches import ContactGroup, merge_contacts
 
-__all__ = ["engage_stiffness", "near_contacts"]
+__all__ = ["engage_stiffness", "near_contacts", "widened"]
 
 
 def engage_stiffness(data: mujoco.MjData, i: int) -> float:
@@ -56,7 +56,7 @@ def engage_stiffness(data: mujoco.MjData, i: int) -> float:
     return float(np.sum(k * imp0 / (c * (1.0 - imp0) / imp0)))
 
 
-def _widened(model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_],
+def widened(model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_],
              near: float) -> tuple[mujoco.MjModel, mujoco.MjData]:  # fmt: skip
     """A copy of the model with ``near`` more margin on every hand geom and hand-object
     ``<pair>``, and its data at ``data``'s configuration after ``mj_forward``."""
@@ -73,34 +73,22 @@ def _widened(model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool
     return m2, d2
 
 
-def near_contacts(model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_],
-                  near: float, stiffness: bool,
+def near_contacts(read: list[ContactGroup], data: mujoco.MjData, near: float, stiffness: bool,
                   merge_tol: float) -> tuple[list[ContactGroup], list[float]]:  # fmt: skip
-    """The near contacts of the state (module docstring) and their gaps [m]; their stiffness
-    [N/m] when ``stiffness`` (else 0)."""
-    from .contacts import contact_frame_force, object_contact_ids
-
-    m2, d2 = _widened(model, data, in_obj, near)
+    """The near contacts (module docstring) and their gaps [m], from ``read``: the object's
+    contacts of the widened copy (:func:`widened`), one :class:`ContactGroup` per MuJoCo
+    contact of ``data`` (the copy's); their force set to 0, their stiffness [N/m] the
+    engaging one when ``stiffness`` (else 0)."""
     found, gap_of = [], {}
-    for i, hand_geom, obj_first in object_contact_ids(d2, in_obj[model.geom_bodyid].tolist()):
-        con = d2.contact[i]
+    for g in read:
+        i = g.ids[0]
+        con = data.contact[i]
         gap = float(con.dist - (con.includemargin - near))
         if not 0.0 < gap < near:
             continue
-        obj_geom = int(con.geom1 if obj_first else con.geom2)
-        if con.dim > 3:
-            raise GraspError(
-                f"near contact {model.geom(hand_geom).name or hand_geom} / "
-                f"{model.geom(obj_geom).name or obj_geom} has condim {con.dim}: torsional or "
-                "rolling friction is not in the point-contact model; use condim 1 or 3"
-            )
-        frame, _ = contact_frame_force(m2, d2, i, obj_first)
-        bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
-        mu = 0.0 if con.dim == 1 else float(con.friction[0])
-        k = engage_stiffness(d2, i) if stiffness else 0.0
-        g = ContactGroup((int(hand_geom), obj_geom), bodies, [con.pos.copy()], frame,
-                         np.zeros(3), mu, [], k)  # fmt: skip
-        found.append(g)
-        gap_of[id(g)] = gap
+        k = engage_stiffness(data, i) if stiffness else 0.0
+        h = replace(g, force_world=np.zeros(3), ids=[], stiffness=k)
+        found.append(h)
+        gap_of[id(h)] = gap
     groups = merge_contacts(found, merge_tol)
     return groups, [gap_of[id(g)] for g in groups]
