@@ -20,9 +20,17 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["EXPERIMENTS", "ExperimentError", "run_experiment"]
+__all__ = ["EXPERIMENTS", "ExperimentError", "MUJOCO_READ", "run_experiment"]
 
 from stability import GraspError
+
+from ..sim_maps import ramp_limit
+
+#: how every experiment reads a grasp with MuJoCo's stiffness
+#: (:func:`ihm.grasp_from_mujoco`): the hand's points within the ramp's 2 mm of the object
+#: that do not touch it yet become contacts at their gap (:mod:`ihm.near`), every contact
+#: the motion the ramp allows can close
+MUJOCO_READ: dict[str, Any] = {"compliance": "mujoco", "near": ramp_limit()[0]}
 
 #: experiment name -> "module:function"; the function takes (out, quick, workers) and
 #: returns a JSON-serialisable summary.

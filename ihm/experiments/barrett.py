@@ -34,6 +34,7 @@ from ..sim_maps import (
     simulated_map,  # fmt: skip
     write_map_csv,
 )
+from . import MUJOCO_READ
 
 __all__ = ["box", "box_3d", "cube", "flask", "seated"]
 
@@ -66,7 +67,8 @@ def _maps(
             rm = simulated_map(spec, workers=workers, progress=False)
         else:
             opts = dict(opts)
-            model_spec = replace(spec, compliance=opts.pop("compliance", "unit"))
+            model_spec = replace(spec, compliance=opts.pop("compliance", "unit"),
+                                 near=opts.pop("near", 0.0))  # fmt: skip
             rm = analysis_map(model_spec, method=method, workers=workers, progress=False, **opts)
         walls[label] = time.perf_counter() - t
         out.append((label, rm))
@@ -119,7 +121,7 @@ def _map_methods(eta: bool = True) -> list[tuple[str, str, dict[str, Any]]]:
         m.append(("refinement 2.5 deg", "refinement",
                   {"time_limit": TIME_LIMIT, "normal_uncertainty": ETA}))  # fmt: skip
     m.append(("iterative", "iterative", {"time_limit": TIME_LIMIT}))
-    m.append((MUJOCO_LABEL, "modesearch", {"time_limit": TIME_LIMIT, "compliance": "mujoco"}))
+    m.append((MUJOCO_LABEL, "modesearch", {"time_limit": TIME_LIMIT, **MUJOCO_READ}))
     return m
 
 
@@ -224,7 +226,7 @@ def box_3d(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         res = {"contact_normal_forces_N": {model.body(b).name: round(float(c), 3) for b, c in
                                            zip(g.hand_bodies, g.forces[:, 0], strict=True)},
                "seated_grasp_kept": ok}  # fmt: skip
-        g_mj = grasp_from_mujoco(model, data, compliance="mujoco")
+        g_mj = grasp_from_mujoco(model, data, **MUJOCO_READ)
         for label, grasp, method in (("refinement", g, "refinement"),
                                      ("iterative", g, "iterative"),
                                      (MUJOCO_LABEL, g_mj, "modesearch")):  # fmt: skip
@@ -279,7 +281,7 @@ def cube(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
         mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         stops = ratchet.stops.copy()
         g = grasp_from_mujoco(model, data)  # the settled grasp, before any ramp moves it
-        g_mj = grasp_from_mujoco(model, data, compliance="mujoco")
+        g_mj = grasp_from_mujoco(model, data, **MUJOCO_READ)
         for name, (d, cap) in loads.items():
             for label, grasp, method in (("refinement", g, "refinement"),
                                          (MUJOCO_LABEL, g_mj, "modesearch")):  # fmt: skip
@@ -356,7 +358,7 @@ def flask(out: Path, quick: bool = False, workers: int = 1) -> dict[str, Any]:
     methods = [("sim", "sim", {}), ("refinement, 2 levels", "refinement", FLASK_REF),
                ("iterative", "iterative", {"time_limit": 30.0}),
                (MUJOCO_LABEL, "modesearch",
-                {"time_limit": 30.0, "compliance": "mujoco"})]  # fmt: skip
+                {"time_limit": 30.0, **MUJOCO_READ})]  # fmt: skip
     summary: dict[str, Any] = {"directions": n, "seat": seat, "cap_N": 10.0}
     panels, all_maps = [], []
     for tag, pre in (("no preload", [0.0] * 4), ("0.1 N m per finger", naive)):

@@ -57,6 +57,7 @@ from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..holds import HoldOptions, hold_trial, static_resistance
 from ..sim_maps import agreement, map_value, scene_disturbance
+from . import MUJOCO_READ
 from .barrett import TIME_LIMIT, seated
 
 __all__ = ["COLUMNS", "box_rows", "cube_rows", "main", "read_rows", "summarise"]
@@ -80,7 +81,8 @@ COLUMNS = ["scene", "map", "angle_deg", "tau3_Nm", "hold", "hold_capped", "hold_
            "hold_at_rest_capped", "hold_long", "hold_long_capped", "unit", "unit_capped",
            "unit_status", "mujoco", "mujoco_capped", "mujoco_status", "ramp",
            "ramp_capped"]  # fmt: skip
-MODELS = {"unit": "unit", "mujoco": "mujoco"}  # CSV column -> grasp_from_mujoco compliance
+#: CSV column -> grasp_from_mujoco options
+MODELS: dict[str, dict[str, Any]] = {"unit": {"compliance": "unit"}, "mujoco": MUJOCO_READ}
 
 
 def _predict(
@@ -142,7 +144,7 @@ def box_rows(n: int = 12, log: Any = None) -> list[dict[str, Any]]:
             R, com = d.xmat[b].reshape(3, 3).copy(), m.body_ipos[b].copy()
             holds = [_hold(loaded, np.r_[R @ u, 0.0, 0.0, 0.0], BOX_CAP) for u in units]
             loaded.ratchet.release()  # the analysis maps read the grasp without the ratchet
-            grasps = {col: grasp_from_mujoco(m, d, compliance=c) for col, c in MODELS.items()}
+            grasps = {col: grasp_from_mujoco(m, d, **kw) for col, kw in MODELS.items()}
             for a, u, hold in zip(angles, units, holds, strict=True):
                 d_obj = np.r_[u, np.cross(com, u)]  # the force through the centre of mass
                 pred = _predictions(grasps, d_obj, loaded.commands, BOX_CAP)
@@ -165,7 +167,7 @@ def cube_rows(log: Any = None) -> list[dict[str, Any]]:
         m, d = loaded
         b = m.body("object").id
         R, com = d.xmat[b].reshape(3, 3).copy(), m.body_ipos[b].copy()
-        grasps = {col: grasp_from_mujoco(m, d, compliance=c) for col, c in MODELS.items()}
+        grasps = {col: grasp_from_mujoco(m, d, **kw) for col, kw in MODELS.items()}
         for name, (dw, cap) in CUBE_LOADS.items():
             f, tq = dw[:3], dw[3:]
             if ok:

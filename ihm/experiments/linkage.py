@@ -40,6 +40,7 @@ from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..sim_maps import scene_disturbance
+from . import MUJOCO_READ
 
 __all__ = ["CONTACT_SETS", "DIRECTIONS", "linkage_box"]
 
@@ -53,8 +54,8 @@ CONTACT_SETS: dict[str, dict[str, Any]] = {
     "extremes2": {"reduce": "extremes", "patch_points": 2},
     "extremes3": {"reduce": "extremes", "patch_points": 3},
     "merged": {},
-    "line, mujoco": {"reduce": "line", "compliance": "mujoco"},
-    "rect, mujoco": {"reduce": "rect", "compliance": "mujoco"},
+    "line, mujoco": {"reduce": "line", **MUJOCO_READ},
+    "rect, mujoco": {"reduce": "rect", **MUJOCO_READ},
 }
 
 

@@ -58,6 +58,7 @@ from ..contacts import HandModelError, HandOptions, SceneGrasp, grasp_from_mujoc
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..scenes import settle
 from ..sim_maps import scene_disturbance
+from . import MUJOCO_READ
 
 __all__ = ["NOSLIP_ITERATIONS", "build", "main", "run"]
 
@@ -199,7 +200,7 @@ def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[
     ``predicted`` row per method, motion limit (the ramp's, and free) and direction."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        g = grasp_from_mujoco(model, data, reduce="line", compliance="mujoco")
+        g = grasp_from_mujoco(model, data, reduce="line", **MUJOCO_READ)
     note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
     rows: list[dict[str, Any]] = []
     limits = {"mujoco, line": None, "mujoco, line, free": (np.inf, np.inf)}

@@ -46,6 +46,7 @@ from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..sim_maps import MapSpec, agreement, analysis_map, scene_disturbance, simulated_map
+from . import MUJOCO_READ
 
 __all__ = [
     "CASES",
@@ -388,7 +389,7 @@ def _torque_case(
     res: dict[str, dict[str, dict[str, Any]]] = {"sim": {}, "refinement": {}, "iterative": {},
                                                  MUJOCO_LABEL: {}}  # fmt: skip
     scene, _ = settle_case(commands)
-    grasp_mj = grasp_from_mujoco(scene.model, scene.data, compliance="mujoco")
+    grasp_mj = grasp_from_mujoco(scene.model, scene.data, **MUJOCO_READ)
     for sign, label in ((1.0, "+x"), (-1.0, "-x")):
         res["sim"][label] = _simulate(commands, sign)
         res["refinement"][label] = _predict(grasp, commands, sign, "refinement",
@@ -456,7 +457,7 @@ def _xy_map(out: Path, st: _Settings, workers: int, rows: list[list[Any]]) -> di
                         time_limit=st.t_map, levels=st.levels)  # fmt: skip
     t_pred = time.perf_counter() - t0
     t0 = time.perf_counter()
-    pred_mj = analysis_map(replace(spec, compliance="mujoco"), method="modesearch",
+    pred_mj = analysis_map(replace(spec, **MUJOCO_READ), method="modesearch",
                            workers=workers, progress=False, time_limit=st.t_map)  # fmt: skip
     t_mj = time.perf_counter() - t0
     agree = agreement(pred, sim)
