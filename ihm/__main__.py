@@ -203,6 +203,10 @@ def _add_map(sub: Any) -> None:
                      "load held with the object's centre of mass within SHIFT [m] and its "
                      "rotation within TURN [rad] of the settled state (default 0.002 0.05, "
                      "where the simulated ramp stops; inf inf: free)")  # fmt: skip
+    mp_.add_argument("--near", type=float, default=0.0, metavar="D",
+                     help="with --compliance mujoco: hand points within D [m] of the object that "
+                     "do not touch it yet become contacts at their gap (ihm.near; default 0, "
+                     "none; the experiments use 0.002)")  # fmt: skip
     mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
     mp_.add_argument("--workers", type=int, default=1, help="processes (default 1); with "
                      "--ray, the CPUs of a new local Ray cluster")  # fmt: skip
@@ -335,6 +339,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
         spec = MapSpec(args.scene, args.plane, args.directions, seat=args.seat,
                        nonbackdrivable=args.nonbackdrivable, frame=args.frame,
                        cap=args.cap, object_body=args.object_body, compliance=args.compliance,
+                       near=args.near,
                        motion_limit=None if args.motion_limit is None
                        else tuple(args.motion_limit))  # fmt: skip
         for method in args.method:

@@ -143,6 +143,8 @@ def test_map_with_mujocos_stiffness_and_a_motion_limit(gripper: Path, tmp_path: 
         assert tight[angle][0] == pytest.approx(free[angle][0], rel=1e-6)
     assert main([*base[:-2], "--motion-limit", "0.001", "0.05"]) == 2
     _one_error_line(capsys, "needs compliance 'mujoco'")
+    assert main([*base[:-2], "--near", "0.001"]) == 2
+    _one_error_line(capsys, "needs compliance 'mujoco'")
 
 
 def test_sim_map_of_a_relative_path_on_workers(gripper: Path, monkeypatch) -> None:
