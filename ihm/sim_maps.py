@@ -326,8 +326,9 @@ def scene_disturbance(
 
 def map_value(sol: Any) -> tuple[float, bool]:
     """A MaxDisturbance solution as a map entry ``(value, capped)``: NaN when the solver
-    gave no answer (time-out, error), 0 when unstable, else the value [N or N m]."""
-    if sol.status not in ("solved", "optimal") and sol.value is None:
+    gave no answer (time-out, error; a time-out's bracket stays in ``sol.lower`` and
+    ``sol.upper``), 0 when unstable, else the value [N or N m]."""
+    if sol.status not in ("solved", "optimal"):
         return float("nan"), False
     value = sol.value if sol.stable and sol.value is not None else 0.0
     return float(value), bool(sol.stats.get("capped", False))

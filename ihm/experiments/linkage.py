@@ -39,7 +39,7 @@ from stability.io import write_csv
 from .. import scenes
 from ..contacts import grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
-from ..sim_maps import scene_disturbance
+from ..sim_maps import map_value, scene_disturbance
 from . import MUJOCO_READ
 
 __all__ = ["CONTACT_SETS", "DIRECTIONS", "linkage_box"]
@@ -77,12 +77,12 @@ def predict(contact_set: str, direction: str, time_limit: float = TIME_LIMIT_S) 
     method = "modesearch" if g.compliant else "refinement"
     sol = solve(g, scene_disturbance(g, d, g.commands, CAP_N), method=method,
                 time_limit=time_limit)  # fmt: skip
-    value = float("nan")
-    if sol.value is not None:
-        value = float(sol.value) if sol.stable else 0.0
+    value, _ = map_value(sol)
     return {
         "contacts": g.m,
         "value": value,
+        "lower": sol.lower,
+        "upper": sol.upper,
         "status": str(sol.status),
         "certified": sol.stats.get("certified"),
         "seconds": time.perf_counter() - t0,

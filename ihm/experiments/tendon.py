@@ -45,7 +45,14 @@ from stability.io import write_csv
 from .. import scenes
 from ..contacts import SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
-from ..sim_maps import MapSpec, agreement, analysis_map, scene_disturbance, simulated_map
+from ..sim_maps import (
+    MapSpec,
+    agreement,
+    analysis_map,
+    map_value,
+    scene_disturbance,
+    simulated_map,
+)
 from . import MUJOCO_READ
 
 __all__ = [
@@ -127,9 +134,7 @@ def _predict(
     except Exception as exc:  # a solver error is a result too: record it, go on
         return {"value": float("nan"), "capped": False, "status": f"error: {exc}",
                 "seconds": time.perf_counter() - t0}  # fmt: skip
-    value = float("nan")
-    if sol.value is not None:
-        value = float(sol.value) if sol.stable else 0.0
+    value, _ = map_value(sol)
     mdp = None
     if sol.forces is not None:
         try:  # the proof: how far the answer is from maximum dissipation [model units]

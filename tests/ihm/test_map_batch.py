@@ -54,3 +54,18 @@ def test_ihm_map_on_ray_equals_local(tmp_path: Path) -> None:
     local = analysis_map(spec, method="gws", progress=False, workers=2)
     np.testing.assert_array_equal(on_ray.magnitudes, local.magnitudes)
     np.testing.assert_array_equal(on_ray.capped, local.capped)
+
+
+def test_map_value_of_a_time_out_is_no_answer() -> None:
+    """A time-out's exact point is only the bracket's lower end: the map says NaN (no
+    answer), not 0 (unstable); a solved unstable answer is 0, a solved one its value."""
+    from ihm.sim_maps import map_value
+    from stability import Grasp, MaxDisturbance, Solution
+
+    g = Grasp([[-1.0, 0, 0], [1.0, 0, 0]], [[1.0, 0, 0], [-1.0, 0, 0]], mu=0.5)
+    q = MaxDisturbance([0, 1.0, 0, 0, 0, 0])
+    late = Solution(None, "modesearch", g, q, value=3.0, status="timeout", lower=3.0, upper=4.0)
+    v, capped = map_value(late)
+    assert np.isnan(v) and not capped
+    assert map_value(Solution(False, "modesearch", g, q, value=None)) == (0.0, False)
+    assert map_value(Solution(True, "modesearch", g, q, value=2.5)) == (2.5, False)
