@@ -395,10 +395,15 @@ def contact_frame_force(
 
 
 def _read(
-    model: mujoco.MjModel, data: mujoco.MjData, in_obj: NDArray[np.bool_], stiffness: bool
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    in_obj: NDArray[np.bool_],
+    stiffness: bool,
+    span: float = 0.0,
 ) -> list[ContactGroup]:
     """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`), with
-    its normal stiffness (:func:`ihm.compliance.contact_stiffness`) if ``stiffness``;
+    its normal stiffness (:func:`ihm.compliance.contact_stiffness`, the secant over ``span``
+    when ``span > 0``) if ``stiffness``;
     :class:`GraspError` for a contact with torsional or rolling friction."""
     out = []
     for i, hand_geom, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
@@ -413,7 +418,7 @@ def _read(
         obj_geom = con.geom1 if obj_first else con.geom2
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
-        k = float(contact_stiffness(model, data, [i])[0]) if stiffness else 0.0
+        k = float(contact_stiffness(model, data, [i], span)[0]) if stiffness else 0.0
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
                                 frame, frame.T @ force, mu, [i], k))  # fmt: skip
     return out
@@ -431,6 +436,7 @@ def grasp_from_mujoco(
     hand_rtol: float = 0.02,
     compliance: str = "unit",
     near: float = 0.0,
+    contact_span: float = 0.0,
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
 
@@ -459,6 +465,10 @@ def grasp_from_mujoco(
     ``near`` of the object that do not touch it yet (MuJoCo's collision with ``near`` more
     margin) become contacts too, with force 0, MuJoCo's stiffness as they engage and their
     gap in ``grasp.gaps`` (:mod:`ihm.near`); they come after the touching contacts.
+    ``contact_span`` [m] (``compliance="mujoco"`` only; default 0): a touching contact's
+    stiffness is the secant of MuJoCo's static law over ``contact_span`` more penetration
+    (:func:`ihm.compliance.secant_stiffness`: MuJoCo's contacts stiffen as they press)
+    instead of its slope at the state.
 
     Raises
     ------
@@ -482,9 +492,12 @@ def grasp_from_mujoco(
         raise GraspError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
     if not (isinstance(near, (int, float)) and np.isfinite(near) and near >= 0):
         raise GraspError(f"near must be a finite number >= 0 [m], got {near!r}")
-    if near > 0 and compliance != "mujoco":
-        raise GraspError("near contacts need compliance='mujoco': a gap in metres has no "
-                         "meaning for the thesis' unit springs")  # fmt: skip
+    if not (isinstance(contact_span, (int, float)) and np.isfinite(contact_span)
+            and contact_span >= 0):  # fmt: skip
+        raise GraspError(f"contact_span must be a finite number >= 0 [m], got {contact_span!r}")
+    if (near > 0 or contact_span > 0) and compliance != "mujoco":
+        raise GraspError("near contacts and contact_span need compliance='mujoco': a length "
+                         "in metres has no meaning for the thesis' unit springs")  # fmt: skip
     mj = compliance == "mujoco"
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
@@ -492,7 +505,7 @@ def grasp_from_mujoco(
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
-    groups = merge_contacts(_read(model, data, in_obj, mj), merge_tol)
+    groups = merge_contacts(_read(model, data, in_obj, mj, float(contact_span)), merge_tol)
     if not groups:
         raise GraspError(
             f"no active contact between body {object_body!r} and the hand "

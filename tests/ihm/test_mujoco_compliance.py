@@ -13,6 +13,7 @@ from ihm.compliance import (
     actuator_stiffness,
     contact_rows,
     contact_stiffness,
+    impedance,
     limit_gaps,
     passive_stiffness,
     probe_contact_stiffness,
@@ -147,6 +148,33 @@ def test_position_dependent_impedance_and_margin():
     h = 1e-8
     assert K == pytest.approx(-(f(r + h) - f(r - h)) / (2 * h), rel=1e-5)
     assert f(r) == pytest.approx(0.4 * 9.81, rel=1e-3)
+
+
+def test_secant_stiffness_of_the_static_law():
+    """``contact_stiffness(..., span)``: the secant of the static law over ``span`` more
+    penetration, against the law written out here; the impedance MuJoCo reports; the
+    slope as the span vanishes; stiffer than the slope on the rising sigmoid."""
+    solimp = (0.5, 0.95, 0.004, 0.3, 3.0)
+    model, data = sphere_on_plane(solimp=" ".join(map(str, solimp)), margin=0.002)
+    con = data.contact[0]
+    r = con.dist - con.includemargin
+    rows = [j for j in contact_rows(data, 0) if data.efc_KBIP[j, 0] > 0]
+    assert impedance(np.array(solimp), np.array([r]))[0] == pytest.approx(
+        data.efc_KBIP[rows[0], 2], rel=1e-12
+    )
+    k = 1.0 / (solimp[1] ** 2 * 0.02**2)
+    A = model.body_invweight0[model.body("object").id, 0]
+
+    def f(x):
+        imp = mujoco_impedance(solimp, x)
+        return -k * imp**2 * x / ((1 - imp) * A)
+
+    slope = contact_stiffness(model, data, [0])[0]
+    for span in (1e-3, 3e-3, 1e-2):  # on the sigmoid, across its end, beyond it
+        sec = contact_stiffness(model, data, [0], span)[0]
+        assert sec == pytest.approx((f(r - span) - f(r)) / span, rel=1e-9)
+        assert sec > slope
+    assert contact_stiffness(model, data, [0], 1e-10)[0] == pytest.approx(slope, rel=1e-5)
 
 
 def test_contact_not_engaged_gets_the_engaging_slope():
