@@ -49,6 +49,7 @@ __all__ = [
     "map_value",
     "plot_maps",
     "ramp_limit",
+    "scene_preload",
     "scene_map_rows",
     "simulated_map",
     "write_map_csv",
@@ -309,12 +310,9 @@ def scene_disturbance(
     close."""
     from stability import MaxDisturbance, MotionLimit
 
-    preload = limit = None
+    preload, limit = scene_preload(grasp), None
     if grasp.compliant:
-        preload = grasp.forces[:, 0].copy()
         near = np.zeros(grasp.m, dtype=bool) if grasp.near is None else grasp.near
-        if np.any(near):
-            preload[near] = -grasp.stiffness[near] * grasp.gaps[near]
         touching = set(grasp.hand_bodies[~near].tolist())
         new = near & np.array([b not in touching for b in grasp.hand_bodies.tolist()])
         shift, turn = map(float, ramp_limit() if motion_limit is None else motion_limit)
@@ -322,6 +320,19 @@ def scene_disturbance(
             limit = MotionLimit(shift, turn, point=grasp.object_com, open=new)
     return MaxDisturbance(direction, commands=commands, cap=cap, base=grasp.gravity_wrench,
                           preload=preload, motion_limit=limit)  # fmt: skip
+
+
+def scene_preload(grasp: Any) -> np.ndarray | None:
+    """The contacts' preloads [N] every query of a settled scene's grasp starts from
+    (:func:`scene_disturbance`): None with the thesis' unit springs (unloaded); with
+    MuJoCo's stiffness (``grasp.compliant``) the settled normal forces, and ``-k g`` at its
+    near contacts (``grasp.near``, ``grasp.gaps``)."""
+    if not grasp.compliant:
+        return None
+    preload = grasp.forces[:, 0].copy()
+    if grasp.near is not None and np.any(grasp.near):
+        preload[grasp.near] = -grasp.stiffness[grasp.near] * grasp.gaps[grasp.near]
+    return preload
 
 
 def map_value(sol: Any) -> tuple[float, bool]:

@@ -57,7 +57,7 @@ from stability.io import write_csv
 from ..contacts import HandModelError, HandOptions, SceneGrasp, grasp_from_mujoco
 from ..resistance import ResistanceOptions, simulated_resistance
 from ..scenes import settle
-from ..sim_maps import scene_disturbance
+from ..sim_maps import map_value, scene_disturbance, scene_preload
 from . import MUJOCO_READ
 
 __all__ = ["NOSLIP_ITERATIONS", "build", "main", "run"]
@@ -183,9 +183,7 @@ def unit_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[st
         for name in DIRECTIONS:
             t0 = time.perf_counter()
             sol = ask(g, name, "refinement", time_limit)
-            value = np.nan  # no answer (time-out, not converged)
-            if sol.status == "solved":
-                value = float(sol.value) if sol.stable else 0.0  # 0: unstable
+            value, _ = map_value(sol)  # NaN: no answer (time-out, not converged)
             rows.append({"kind": "predicted", "variant": variant, "method": "refinement",
                          "direction": name, "value": value, "status": sol.status,
                          "lower": sol.lower, "upper": sol.upper,
@@ -203,23 +201,22 @@ def mujoco_rows(model: mujoco.MjModel, data: mujoco.MjData, sim: dict[str, dict[
         g = grasp_from_mujoco(model, data, reduce="line", **MUJOCO_READ)
     note = "; ".join(str(w.message).split(": ", 2)[-1][:90] for w in caught)
     rows: list[dict[str, Any]] = []
-    limits = {"mujoco, line": None, "mujoco, line, free": (np.inf, np.inf)}
-    for method, (variant, limit) in itertools.product(methods, limits.items()):
+    for method in methods:  # the weight alone, from the settled state: nothing moves
         t0 = time.perf_counter()
-        w = solve(g, Existence(g.gravity_wrench, commands=g.commands, preload=g.forces[:, 0]),
+        w = solve(g, Existence(g.gravity_wrench, commands=g.commands, preload=scene_preload(g)),
                   method=method, time_limit=time_limit)  # fmt: skip
-        rows.append({"kind": "weight", "variant": variant, "method": method,
+        rows.append({"kind": "weight", "variant": "mujoco, line", "method": method,
                      "status": w.status, "value": w.stable,
                      "seconds": time.perf_counter() - t0, "hand_residual": g.hand_residual,
                      "warning": note})  # fmt: skip
+    limits = {"mujoco, line": None, "mujoco, line, free": (np.inf, np.inf)}
+    for method, (variant, limit) in itertools.product(methods, limits.items()):
         for name in DIRECTIONS:
             t0 = time.perf_counter()
             q = scene_disturbance(g, object_direction(g, name), g.commands, CAP, limit)
             sol = solve(g, q, method=method, time_limit=time_limit)
             seconds = time.perf_counter() - t0
-            value = np.nan
-            if sol.status == "solved":
-                value = float(sol.value) if sol.stable else 0.0
+            value, _ = map_value(sol)
             shift, turn, hand = motion_size(sol)
             states = " ".join(() if sol.states is None else sol.states)
             rows.append({"kind": "predicted", "variant": variant, "method": method,
