@@ -9,7 +9,9 @@ episode, e.g. ``gym.make("ihm/IslandsBridges-v0", reward="sparse")``:
 - ``ihm/IslandsBridgesRing-v0``: the four-island ring (``RING_ISLANDS``/``RING_BRIDGES``).
 
 and the four-finger in-hand rotation task of thesis ch. 7 (:mod:`envs.four_finger`),
-64 steps per episode as in the thesis: ``gym.make("ihm/FourFingerRotate-v0", object="sphere")``.
+64 steps per episode as in the thesis: ``gym.make("ihm/FourFingerRotate-v0", object="sphere")``,
+and the same task with the object drawn per episode,
+``gym.make("ihm/FourFingerRotateMixed-v0", objects=("sphere", "cylinder", "cube"))``.
 """
 
 import gymnasium
@@ -52,9 +54,9 @@ for _id, _kwargs in (
             kwargs=_kwargs,
         )
 
-if "ihm/FourFingerRotate-v0" not in gymnasium.registry:
-    gymnasium.register(
-        id="ihm/FourFingerRotate-v0",
-        entry_point="envs.four_finger:FourFingerRotate",
-        max_episode_steps=64,
-    )
+for _id, _entry in (
+    ("ihm/FourFingerRotate-v0", "envs.four_finger:FourFingerRotate"),
+    ("ihm/FourFingerRotateMixed-v0", "envs.four_finger:MixedObjectRotate"),
+):
+    if _id not in gymnasium.registry:
+        gymnasium.register(id=_id, entry_point=_entry, max_episode_steps=64)

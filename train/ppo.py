@@ -4,6 +4,9 @@
   of thesis ch. 7 (:mod:`train.rotation`; ``python -m train.ppo --help`` lists its options);
 - ``python -m train.ppo seeds --seeds N [options]``: the main job for N seeds, each evaluated
   on held-out start grasps, with a CSV and chart of the spread (:mod:`train.seeds`);
+- ``python -m train.ppo generalist [options]``: one rotation policy for the sphere, the cylinder
+  and the cube over the full randomised ranges (``--generalist``:
+  :data:`train.rotation_config.GENERALIST`; docs/four_finger_generalist.md);
 - ``python -m train.ppo islands [options]``: PPO on a shielded islands-and-bridges env
   (:mod:`train.islands_ppo`; ``python -m train.ppo islands --help``).
 
@@ -32,12 +35,15 @@ TASKS: dict[str, Task] = {t.name: t for t in (rotation.TASK, islands_ppo.TASK)}
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """``python -m train.ppo``: the four-finger rotation main job (:data:`train.rotation.TASK`)
     by default; ``islands`` as the first argument trains on the islands-and-bridges toy
-    (:data:`train.islands_ppo.TASK`), ``seeds`` runs the main job for several seeds.
+    (:data:`train.islands_ppo.TASK`), ``seeds`` runs the main job for several seeds,
+    ``generalist`` the rotation task with ``--generalist``.
     ``--resume RUN_DIR`` picks the task from the run's config.json. Returns the trainer's
     final evaluation."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "islands":
         return train(islands_ppo.TASK, argv[1:])
+    if argv and argv[0] == "generalist":
+        return train(rotation.TASK, ["--generalist", *argv[1:]])
     if argv and argv[0] == "seeds":
         from train import seeds
 

@@ -70,6 +70,7 @@ from envs.four_finger import (
 )
 from shields import make_shield
 from stability.io import write_csv
+from train.adr import AdrCallback
 from train.curves import monitor_returns, plot_curve, steps_label
 from train.evaluation import evaluate_rotation
 from train.pipeline import PipelinedPPO
@@ -132,6 +133,7 @@ __all__ = [
 ]
 
 ENV_ID = "ihm/FourFingerRotate-v0"
+MIXED_ENV_ID = "ihm/FourFingerRotateMixed-v0"  # --objects: the object drawn per episode
 TARGET_SPEED = 0.5  # [rad/s] the task's target, over 20 s episodes; drops <= 5 %
 MAX_DROP_RATE = 0.05  # the task's drop target
 SHIELD_KEYS = ("shield_episode_interventions", "shield_episode_seconds")  # monitor.csv columns
@@ -146,7 +148,9 @@ def make_env(
     train: bool = True,
     physics: PhysicsSample | None = None,
 ) -> Callable[[], gym.Env]:
-    """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` with the config's groups as they are
+    """A thunk: ``gym.make(ihm/FourFingerRotate-v0)`` (with ``--objects``
+    ``ihm/FourFingerRotateMixed-v0``, the object drawn per episode) with the config's groups
+    as they are
     (time limit ``max_steps``, default ``cfg.episode_steps``) -> the shield ``--shield``
     (:func:`shields.make_shield`) -> Monitor (the episode's drop and, under a shield,
     :data:`SHIELD_KEYS`) when ``monitor_file`` is given; seeded with ``seeds``. Training envs
@@ -156,9 +160,10 @@ def make_env(
 
     def thunk() -> gym.Env:
         starts = cfg.starts if train else replace(cfg.starts, replay_prob=0.0, turned_prob=0.0)
+        which = {"objects": tuple(cfg.objects)} if cfg.objects else {"object": cfg.object}
         env = gym.make(
-            ENV_ID,
-            object=cfg.object,
+            MIXED_ENV_ID if cfg.objects else ENV_ID,
+            **which,
             reward=cfg.reward,
             sim=cfg.sim,
             starts=starts,
@@ -315,7 +320,8 @@ class RotationTask(Task):
     def run_name(self, cfg: RotateConfig) -> str:
         shield = "" if cfg.shield == "none" else f"__{cfg.shield}"
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        return f"FourFingerRotate-{cfg.object}{shield}__{cfg.seed}__{stamp}"
+        what = "-".join(cfg.objects) if cfg.objects else cfg.object
+        return f"FourFingerRotate-{what}{shield}__{cfg.seed}__{stamp}"
 
     def resume_options(self, cfg: RotateConfig, argv: Sequence[str]) -> tuple[str, ...]:
         keep = ("total_steps", "progress", "verbose", "threads", "workers", "pipeline")
@@ -326,8 +332,9 @@ class RotationTask(Task):
         randomised physics and the fine-tune options given (:mod:`train.runfiles`)."""
         s, starts = cfg.sim, cfg.starts
         seed = GRASP_SETS[starts.grasps]
-        grasp_cache(cfg.object, s.gravity, starts.n_grasps, seed=seed, timestep=s.timestep,
-                    frame_skip=s.frame_skip, grip=starts.grip)  # fmt: skip
+        for obj in cfg.objects or [cfg.object]:
+            grasp_cache(obj, s.gravity, starts.n_grasps, seed=seed, timestep=s.timestep,
+                        frame_skip=s.frame_skip, grip=starts.grip)  # fmt: skip
         if cfg.resume is not None and given(argv, "randomize") and not cfg.randomization.randomize:
             cfg = start_randomizing(cfg, run_dir, done)
         finetune = _finetune(cfg, argv)
@@ -366,8 +373,9 @@ class RotationTask(Task):
             for s in seeds.envs("validation", n_eval)
         ]
         corner_envs = []
-        if cfg.randomization.randomize and cfg.validate_corners:
-            cases = corners(training_randomization(cfg))
+        rnd = cfg.randomization
+        if rnd.randomize and cfg.validate_corners:
+            cases = corners(rnd.full_ranges() if rnd.adr_step else training_randomization(cfg))
             streams = seeds.envs("validation", n_eval + len(cases))[n_eval:]
             corner_envs = [
                 make_env(cfg, s, max_steps=max_eval, train=False, physics=c)()
@@ -388,7 +396,12 @@ class RotationTask(Task):
         self, cfg: RotateConfig, run_dir: Path, evals: RotationEvals
     ) -> list[BaseCallback]:
         ev = EvalCallback(cfg, run_dir, evals.validation, cfg.checkpoint_every, evals.corners)
-        return [ev, RolloutThreads(cfg.threads)] if cfg.workers else [ev]
+        out: list[BaseCallback] = [ev]
+        rnd = cfg.randomization
+        if rnd.randomize and rnd.adr_step:
+            adr = (rnd.adr_every, rnd.adr_step, rnd.adr_widen, rnd.adr_narrow)
+            out.append(AdrCallback(rnd.full_ranges(), rnd.range_scale, *adr, run_dir))
+        return [*out, RolloutThreads(cfg.threads)] if cfg.workers else out
 
     def evaluate(self, run: Run, train_seconds: float) -> dict[str, Any]:
         """The last validation (also a row of eval.csv) with the run's size and speed, the

@@ -23,6 +23,7 @@ from envs.four_finger import (
     HEIGHT_FROM,
     OBJECTS,
     TIMESTEP,
+    TRAIN_OBJECTS,
     FourFingerError,
     ObservationSettings,
     Randomization,
@@ -37,6 +38,7 @@ from train.runfiles import policy_dir
 from train.sb3 import option_problems
 
 __all__ = [
+    "GENERALIST",
     "POLICY_DT",
     "THESIS",
     "RotateConfig",
@@ -65,6 +67,32 @@ rotation reward without a drop penalty, nominal physics, a constant learning rat
 given beside ``--thesis`` still apply."""
 
 
+GENERALIST: dict[str, Any] = {
+    "objects": list(TRAIN_OBJECTS),
+    "randomize": True,
+    "range_scale": 0.25,
+    "adr_step": 0.125,
+    "corner_prob": 0.25,
+    "grip": "firm",
+    "history": 3,
+    "privileged_critic": True,
+    "episode_steps": 200,
+    "slip_weight": 10.0,
+    "tilt_weight": 1.0,
+    "learning_rate": 1e-4,
+    "lr_schedule": "constant",
+    "total_steps": 20_000_000,
+    "checkpoint_every": 245_760,
+    "validate_corners": 1,
+    "init_from": "policies/four_finger_sphere_robust",
+}
+"""What ``--generalist`` (``python -m train.ppo generalist``) sets as the defaults: one policy
+for the sphere, the cylinder and the cube (drawn per episode), physics over the full
+ranges reached by automatic domain randomisation from a quarter of them (:mod:`train.adr`),
+three observed frames and an asymmetric critic, 10 s training episodes, started from the
+robust sphere policy. Options given beside it still apply."""
+
+
 @dataclass(frozen=True)
 class TrainingRandomization:
     """The randomised physics of the training envs: with ``randomize``, each training episode
@@ -72,7 +100,10 @@ class TrainingRandomization:
     probabilities ``corner_prob``, ``hard_prob`` and ``latency_prob`` and the hard region's
     gain bound ``hard_gain``, its friction, torsional, mass and gain ranges shrunk towards
     nominal by ``range_scale`` in (0, 1] (:meth:`Randomization.scaled`). Evaluations stay
-    nominal."""
+    nominal. ``adr_step > 0``: automatic domain randomisation (:mod:`train.adr`): the scale
+    starts at ``range_scale`` and moves by ``adr_step`` every ``adr_every`` env steps, up
+    when the training episodes' drop rate is at most ``adr_widen``, down when it is above
+    ``adr_narrow``."""
 
     randomize: bool = False
     corner_prob: float = 0.0
@@ -80,18 +111,27 @@ class TrainingRandomization:
     hard_gain: float = Randomization().gain[1]
     latency_prob: float = Randomization().latency_prob
     range_scale: float = 1.0
+    adr_step: float = 0.0
+    adr_every: int = 122_880
+    adr_widen: float = 0.10
+    adr_narrow: float = 0.25
+
+    def full_ranges(self) -> Randomization:
+        """The ranges at scale 1 with the config's sampling probabilities (what ADR widens
+        towards)."""
+        return Randomization(
+            corner_prob=self.corner_prob,
+            hard_prob=self.hard_prob,
+            hard_gain=self.hard_gain,
+            latency_prob=self.latency_prob,
+        )
 
     def ranges(self) -> Randomization | None:
         """The :class:`Randomization` the training envs draw from, or ``None`` without
         ``randomize`` (:class:`FourFingerError` for a bad probability, bound or scale)."""
         if not self.randomize:
             return None
-        return Randomization(
-            corner_prob=self.corner_prob,
-            hard_prob=self.hard_prob,
-            hard_gain=self.hard_gain,
-            latency_prob=self.latency_prob,
-        ).scaled(self.range_scale)
+        return self.full_ranges().scaled(self.range_scale)
 
 
 @dataclass
@@ -105,6 +145,16 @@ class RotateConfig:
     ``sim.frame_skip`` follows ``sim.timestep``: the policy period stays ``POLICY_DT``."""
 
     object: str = opt("sphere", "object in the hand", choices=OBJECTS)
+    objects: list[str] = opt(
+        [],
+        "objects drawn per training and validation episode, uniformly, their identity not "
+        "observed (envs.four_finger.MixedObjectRotate); empty: --object alone",
+    )
+    generalist: bool = opt(
+        False,
+        "the generalist's setup as the defaults (train.rotation_config.GENERALIST: three "
+        "objects, full ranges by ADR, history, asymmetric critic); other options apply",
+    )
     thesis: bool = opt(
         False, "the thesis' setup as the defaults (train.rotation.THESIS); other options apply"
     )
@@ -196,8 +246,17 @@ class RotateConfig:
             "with --randomize: shrink the friction, torsional, mass and gain ranges towards "
             "nominal by this factor in (0, 1] (Randomization.scaled; 0.5: friction x0.75-1.25, "
             "mass x0.71-1.41); latency and noise stay. A first curriculum stage; the corners "
-            "validated are the scaled range's"
+            "validated are the scaled range's (with --adr-step: the full range's)"
         ),
+        adr_step=Flag(
+            "with --randomize: automatic domain randomisation (train.adr): the range scale "
+            "starts at --range-scale and moves by this step; 0: fixed ranges"
+        ),
+        adr_every=Flag("with --adr-step: env steps between the curriculum's decisions"),
+        adr_widen=Flag(
+            "with --adr-step: widen when the training episodes' drop rate is at most this"
+        ),
+        adr_narrow=Flag("with --adr-step: narrow when the drop rate is above this"),
     )
     starts: StartSettings = group(
         StartSettings(),
@@ -280,6 +339,8 @@ def parse_config(argv: Sequence[str] | None = None) -> RotateConfig:
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--thesis" in argv:
         parser.set_defaults(**THESIS)
+    if "--generalist" in argv:
+        parser.set_defaults(**GENERALIST)
     values = vars(parser.parse_args(argv))
     try:  # the groups check their own values (envs.four_finger.settings)
         env_physics(values["timestep"])
@@ -312,10 +373,17 @@ def config_problems(cfg: RotateConfig) -> list[str]:
         problems.append(
             f"--corner-prob, --hard-prob, --hard-gain, --latency-prob, --range-scale: {e}"
         )
+    if any(o not in OBJECTS for o in cfg.objects) or len(set(cfg.objects)) != len(cfg.objects):
+        problems.append(f"--objects must be distinct names of {', '.join(OBJECTS)}")
+    if rnd.adr_step:
+        if not (0 < rnd.adr_step <= 1 and rnd.adr_every >= 1 and rnd.randomize):
+            problems.append("--adr-step must be in (0, 1] with --randomize, --adr-every >= 1")
+        if not 0 <= rnd.adr_widen <= rnd.adr_narrow <= 1:
+            problems.append("--adr-widen and --adr-narrow must satisfy 0 <= widen <= narrow <= 1")
     if cfg.validate_corners < 0:
         problems.append("--validate-corners must be >= 0")
     try:  # the env's own check
-        cfg.starts.for_object(cfg.object)
+        cfg.starts.for_object("cube" if "cube" in cfg.objects else cfg.object)
     except FourFingerError as e:
         problems.append(f"--replay-prob, --turned-prob, --object: {e}")
     if not np.isfinite(cfg.eval_seconds) or cfg.eval_seconds <= 0:

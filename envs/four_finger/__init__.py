@@ -8,6 +8,8 @@ the gymnasium env ``ihm/FourFingerRotate-v0``.
   (:func:`generate_grasps`, :func:`grasp_cache`);
 - :mod:`~envs.four_finger.env`: the env :class:`FourFingerRotate` (its spaces, reward and
   episode end are documented there) and :func:`yaw_rate`;
+- :mod:`~envs.four_finger.mixed`: :class:`MixedObjectRotate`, one env over several objects
+  drawn per episode (``ihm/FourFingerRotateMixed-v0``);
 - :mod:`~envs.four_finger.settings`: the env's settings in groups (reward, simulation, starts,
   observation, rendering: :class:`RewardSettings`, :class:`SimSettings`,
   :class:`StartSettings`, :class:`ObservationSettings`, :class:`RenderSettings`);
@@ -45,6 +47,7 @@ from envs.four_finger.env import (
     z_tilt,
     z_twist,
 )
+from envs.four_finger.mixed import MixedObjectRotate
 from envs.four_finger.physics import (
     CONTACT_LINKS,
     DROP_Z,
@@ -56,6 +59,7 @@ from envs.four_finger.physics import (
     SOLVERS,
     TIMESTEP,
     TORSIONAL_FRICTION,
+    TRAIN_OBJECTS,
     FourFingerError,
     Physics,
     dynamic_pairs,
@@ -95,11 +99,13 @@ __all__ = [
     "STATE_SPEC",
     "TIMESTEP",
     "TORSIONAL_FRICTION",
+    "TRAIN_OBJECTS",
     "TURNED",
     "VERIFY_STEPS",
     "FourFingerError",
     "FourFingerRotate",
     "GraspCache",
+    "MixedObjectRotate",
     "ModelScaler",
     "ObservationSettings",
     "Physics",

@@ -367,6 +367,16 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 self.scaler.apply(physics)
         self._prev_action = np.zeros(ff.NU)
 
+    def set_randomization(self, randomize: Randomization) -> None:
+        """Draw the physics of the episodes from the next reset on from ``randomize`` (a
+        curriculum widening the ranges as training goes: ``train.adr``). The current episode
+        keeps its physics."""
+        if not isinstance(randomize, Randomization):
+            raise FourFingerError(f"set_randomization takes a Randomization, got {randomize!r}")
+        if self.scaler is None:
+            self.scaler = ModelScaler(self.model, self.data, self.physics.obj_body)
+        self.randomize = randomize
+
     @property
     def frame_skip(self) -> int:
         """Physics substeps per policy step (``sim.frame_skip``)."""

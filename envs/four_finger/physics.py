@@ -41,6 +41,7 @@ __all__ = [
     "SOLVER_TOLERANCE",
     "TIMESTEP",
     "TORSIONAL_FRICTION",
+    "TRAIN_OBJECTS",
     "FourFingerError",
     "Physics",
     "dynamic_pairs",
@@ -48,7 +49,8 @@ __all__ = [
     "scene_name",
 ]
 
-OBJECTS = ("sphere", "cylinder", "cube")
+TRAIN_OBJECTS = ("sphere", "cylinder", "cube")  # the objects policies train on
+OBJECTS = TRAIN_OBJECTS
 CONTACT_LINKS = ff.BODY_NAMES  # f1_proximal, f1_distal, ..., f4_distal: observed links
 DROP_Z = 0.05  # [m] object centre below this: dropped
 OUT_RADIUS = 0.045  # [m] object centre farther than this from the palm axis: out of the hand

@@ -1,0 +1,138 @@
+"""Automatic domain randomisation: ranges that widen as the policy holds on.
+
+The training envs draw their physics from :class:`envs.four_finger.Randomization` shrunk
+towards nominal by a scale ``s`` in (0, 1] (:meth:`~envs.four_finger.Randomization.scaled`).
+:class:`AdrCallback` starts at the config's ``range_scale`` and, every ``adr_every`` env
+steps, looks at the training episodes that ended since its last decision:
+
+- drop rate ``<= adr_widen``: ``s += adr_step`` (at most 1, the full ranges);
+- drop rate ``> adr_narrow``: ``s -= adr_step`` (at least the starting scale);
+- otherwise, or with fewer than ``MIN_EPISODES`` episodes: ``s`` stays.
+
+It is the curriculum of OpenAI's ADR (Akkaya et al. 2019) on one scale for the four ranges
+(friction, torsional friction, mass, gains); latency and noise are drawn at their full
+values throughout. The decisions fall on multiples of ``adr_every`` steps, so a run that is
+stopped and resumed makes them at the same steps. The schedule is ``adr.json`` in the run
+directory: the current scale and one row per decision (steps, scale before and after,
+episodes, drop rate). A resumed run reads it back, dropping the decisions made after the
+checkpoint it resumes from.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from envs.four_finger import Randomization
+
+__all__ = ["MIN_EPISODES", "AdrCallback", "AdrState", "next_scale"]
+
+MIN_EPISODES = 16  # episodes a decision needs; with fewer the scale stays
+
+
+@dataclass
+class AdrState:
+    """The curriculum's state: the current ``scale`` and the decisions so far (dicts with
+    ``steps``, ``scale_before``, ``scale``, ``episodes``, ``drop_rate``)."""
+
+    scale: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+    def save(self, path: Path) -> None:
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"scale": self.scale, "history": self.history}, indent=1) + "\n")
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path, start: float, upto: int) -> AdrState:
+        """The state saved at ``path`` as it was at ``upto`` env steps (later decisions
+        dropped), or a new one at ``start`` when there is no file."""
+        if not path.is_file():
+            return cls(start)
+        rows = [r for r in json.loads(path.read_text())["history"] if r["steps"] <= upto]
+        return cls(rows[-1]["scale"] if rows else start, rows)
+
+
+def next_scale(
+    scale: float, drops: int, episodes: int, step: float, widen: float, narrow: float, low: float
+) -> float:
+    """The scale after a decision (module doc): ``scale + step`` (at most 1) when the drop
+    rate ``drops / episodes <= widen``, ``scale - step`` (at least ``low``) when it is above
+    ``narrow``, else ``scale``; unchanged with fewer than :data:`MIN_EPISODES` episodes."""
+    if episodes < MIN_EPISODES:
+        return scale
+    rate = drops / episodes
+    if rate <= widen:
+        return min(1.0, round(scale + step, 10))
+    if rate > narrow:
+        return max(low, round(scale - step, 10))
+    return scale
+
+
+class AdrCallback(BaseCallback):
+    """Widens or narrows the training envs' ranges (module doc). ``base``: the full ranges
+    and sampling probabilities; ``start``: the first scale; ``every`` [env steps]; ``step``,
+    ``widen``, ``narrow``: :func:`next_scale`; the state lives in ``run_dir/adr.json``.
+    The envs must have ``set_randomization`` (:class:`envs.four_finger.FourFingerRotate`,
+    :class:`envs.four_finger.MixedObjectRotate`)."""
+
+    def __init__(
+        self,
+        base: Randomization,
+        start: float,
+        every: int,
+        step: float,
+        widen: float,
+        narrow: float,
+        run_dir: Path,
+    ) -> None:
+        super().__init__()
+        self.base, self.start, self.every = base, start, int(every)
+        self.step, self.widen, self.narrow = step, widen, narrow
+        self.path = Path(run_dir) / "adr.json"
+        self.state = AdrState(start)
+        self.episodes = self.drops = 0
+        self.next = 0
+
+    def ranges(self) -> Randomization:
+        """The ranges of the current scale."""
+        return self.base.scaled(self.state.scale)
+
+    def _apply(self) -> None:
+        self.training_env.env_method("set_randomization", self.ranges())
+        self.logger.record("adr/scale", self.state.scale)
+
+    def _on_training_start(self) -> None:
+        self.state = AdrState.load(self.path, self.start, self.num_timesteps)
+        self.next = (self.num_timesteps // self.every + 1) * self.every
+        self._apply()
+        self.state.save(self.path)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+            if done:
+                self.episodes += 1
+                self.drops += bool(info.get("dropped", False))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.num_timesteps < self.next:
+            return
+        self.next = (self.num_timesteps // self.every + 1) * self.every
+        before = self.state.scale
+        after = next_scale(before, self.drops, self.episodes, self.step, self.widen,
+                           self.narrow, self.start)  # fmt: skip
+        rate = self.drops / self.episodes if self.episodes else None
+        self.state.history.append({
+            "steps": int(self.num_timesteps), "scale_before": before, "scale": after,
+            "episodes": self.episodes, "drop_rate": None if rate is None else round(rate, 4),
+        })  # fmt: skip
+        self.state.scale = after
+        self.episodes = self.drops = 0
+        if after != before:
+            self._apply()
+        self.state.save(self.path)
