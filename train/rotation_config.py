@@ -78,7 +78,7 @@ GENERALIST: dict[str, Any] = {
     "privileged_critic": True,
     "episode_steps": 200,
     "slip_weight": 10.0,
-    "tilt_weight": 1.0,
+    "tilt_weight": 0.25,
     "learning_rate": 1e-4,
     "lr_schedule": "constant",
     "total_steps": 20_000_000,
