@@ -1,10 +1,12 @@
 """Four-finger in-hand rotation (thesis ch. 7, sec. "In-hand manipulation with pure RL").
 
-The 12-DOF four-finger hand (``assets/four_finger``) holds an object (``sphere``,
-``cylinder`` or ``cube``, 0.1 kg, 70 mm; the scenes ``four_finger_<object>``) and
-the policy is rewarded for turning it about the world vertical axis. Gymnasium
-``MujocoEnv`` conventions (``model``, ``data``, ``frame_skip``, ``dt``,
-``render_mode="rgb_array"``), without its ``imageio`` dependency.
+The 12-DOF four-finger hand (``assets/four_finger``) holds an object and the policy is
+rewarded for turning it about the world vertical axis: one of the training objects
+(:data:`~envs.four_finger.physics.TRAIN_OBJECTS`: ``sphere``, ``cylinder`` or ``cube``,
+0.1 kg, 70 mm) or of the held-out ones (:data:`~envs.four_finger.physics.HELDOUT_OBJECTS`:
+``capsule``, 60 mm wide, and ``ellipsoid``, 80 x 66 x 60 mm, 0.1 kg each), the scenes
+``four_finger_<object>``. Gymnasium ``MujocoEnv`` conventions (``model``, ``data``,
+``frame_skip``, ``dt``, ``render_mode="rgb_array"``), without its ``imageio`` dependency.
 
 ## Settings
 
@@ -258,7 +260,8 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     Parameters
     ----------
-    object : ``"sphere"`` (the thesis'), ``"cylinder"`` or ``"cube"``.
+    object : ``"sphere"`` (the thesis'), ``"cylinder"``, ``"cube"``, or the held-out
+        ``"capsule"`` and ``"ellipsoid"`` (:data:`~envs.four_finger.physics.OBJECTS`).
     reward : :class:`~envs.four_finger.settings.RewardSettings`, the reward's terms (module
         doc, "Rewards"); default: the thesis' uncapped rotation rate alone.
     sim : :class:`~envs.four_finger.settings.SimSettings`: gravity, torsional friction,

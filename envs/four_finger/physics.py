@@ -34,6 +34,7 @@ __all__ = [
     "CONTACT_LINKS",
     "DROP_Z",
     "FRAME_SKIP",
+    "HELDOUT_OBJECTS",
     "MAX_FORCE",
     "OBJECTS",
     "OUT_RADIUS",
@@ -49,8 +50,13 @@ __all__ = [
     "scene_name",
 ]
 
-TRAIN_OBJECTS = ("sphere", "cylinder", "cube")  # the objects policies train on
-OBJECTS = TRAIN_OBJECTS
+TRAIN_OBJECTS = ("sphere", "cylinder", "cube")
+"""The objects the shipped policies were trained on (70 mm wide, 0.1 kg)."""
+HELDOUT_OBJECTS = ("capsule", "ellipsoid")
+"""Objects no shipped policy was trained on, for evaluation (``python -m train.heldout
+--object``): an upright capsule 60 mm wide and an ellipsoid of 80 x 66 x 60 mm, 0.1 kg each
+(the scenes ``four_finger_capsule`` and ``four_finger_ellipsoid``)."""
+OBJECTS = TRAIN_OBJECTS + HELDOUT_OBJECTS
 CONTACT_LINKS = ff.BODY_NAMES  # f1_proximal, f1_distal, ..., f4_distal: observed links
 DROP_Z = 0.05  # [m] object centre below this: dropped
 OUT_RADIUS = 0.045  # [m] object centre farther than this from the palm axis: out of the hand
