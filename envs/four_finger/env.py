@@ -128,6 +128,8 @@ from the held-out set instead (a generator seed no training run uses,
 friction, explicit contact pairs. ``randomize=Randomization()`` draws friction, torsional
 friction, object mass, servo gains, one step of action latency and sensor noise per episode;
 ``physics=PhysicsSample(...)`` fixes them (:mod:`envs.four_finger.randomize`).
+``reset(options={"physics": PhysicsSample(...)})`` sets the physics from that episode on, in
+place of a ``randomize`` draw (an evaluation that gives each episode its own physics).
 
 ## Failure replay
 
@@ -498,7 +500,9 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        """Start from a cached stable grasp (``options={"grasp": i}`` picks one)."""
+        """Start from a cached stable grasp (``options={"grasp": i}`` picks one) under the
+        episode's physics (``options={"physics": s}``, a :class:`PhysicsSample`, sets it from
+        this episode on; else a ``randomize`` draw, or the physics kept)."""
         super().reset(seed=seed)
         i = None if options is None else options.get("grasp")
         replay = None
@@ -513,7 +517,14 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         elif not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.grasps):
             raise FourFingerError(f"options['grasp'] must be in [0, {len(self.grasps)}), got {i!r}")
         m, d = self.model, self.data
-        if self.randomize is not None:  # a replayed start keeps its physics (never None here)
+        given = None if options is None else options.get("physics")
+        if given is not None:
+            if not isinstance(given, PhysicsSample):
+                raise FourFingerError(f"options['physics'] must be a PhysicsSample, got {given!r}")
+            if self.scaler is None:
+                self.scaler = ModelScaler(m, d, self.physics.obj_body)
+            self.scaler.apply(given)
+        elif self.randomize is not None:  # a replayed start keeps its physics (never None here)
             s = replay[1] if replay is not None else self.randomize.sample(self.np_random, ff.NU)
             self.scaler.apply(s)  # type: ignore[union-attr, arg-type]
         self._grasp = int(i)

@@ -143,6 +143,31 @@ def test_fixed_physics_is_read_back_from_mujoco() -> None:
     np.testing.assert_allclose(d.actuator_force, np.clip(0.8 * (d.ctrl - q), -0.5, 0.5), atol=1e-9)
 
 
+def test_physics_given_at_reset_is_read_back_and_kept() -> None:
+    """``reset(options={"physics": s})`` writes ``s`` into the MjModel of an env built without
+    randomised physics, keeps it for the next resets, and overrides a ``randomize`` draw; a
+    value that is not a PhysicsSample is refused."""
+    env = FourFingerRotate()
+    b = env.physics.obj_body
+    m0 = env.model.body_mass[b]
+    kp0 = env.model.actuator_gainprm[:, 0].copy()
+    mu0 = env.model.pair_friction[:, 0].copy()
+    s = PhysicsSample(friction=0.7, mass=1.1, gain=tuple(np.linspace(0.8, 1.2, 12)))
+    env.reset(seed=0, options={"grasp": 3, "physics": s})
+    assert env.scaler is not None and env.scaler.current == s
+    assert env.model.body_mass[b] == pytest.approx(1.1 * m0)
+    np.testing.assert_allclose(env.model.actuator_gainprm[:, 0], np.linspace(0.8, 1.2, 12) * kp0)
+    pairs = env.scaler.obj_pairs
+    np.testing.assert_allclose(env.model.pair_friction[pairs, 0], 0.7 * mu0[pairs])
+    env.reset(options={"grasp": 4})
+    assert env.scaler.current == s
+    r = FourFingerRotate(randomize=Randomization())
+    r.reset(seed=0, options={"physics": s})
+    assert r.scaler is not None and r.scaler.current == s
+    with pytest.raises(FourFingerError, match="PhysicsSample"):
+        env.reset(options={"physics": 0.5})
+
+
 def test_randomization_draws_within_ranges_and_changes_each_episode() -> None:
     r = Randomization()
     env = FourFingerRotate(randomize=r)
