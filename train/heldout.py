@@ -487,7 +487,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         ranges = Randomization().scaled(a.range_scale)
     except FourFingerError as e:
         p.error(f"--range-scale: {e}")
-    n_default, s_default = (PLAYGROUND.episodes, PLAYGROUND.seconds) if playground else (100, 20.0)
+    n_default, s_default = (
+        (PLAYGROUND.episodes, PLAYGROUND.seconds) if playground else (TEST_GRASPS, 20.0)
+    )
     episodes = a.episodes if a.episodes is not None else n_default
     seconds = a.seconds if a.seconds is not None else s_default
     top = math.inf if playground else TEST_GRASPS
