@@ -33,6 +33,26 @@ the hand still (zero actions) instead of running the policy: the drops are then 
 grasps' own. ``--range-scale S`` (in (0, 1]) evaluates the corners and factors of the ranges
 shrunk towards nominal (:meth:`envs.four_finger.Randomization.scaled`) and names the files
 ``robustness_xS.csv`` and ``factors_xS.csv``: a narrower stated range.
+
+**Another object** (``--object NAME``, :data:`envs.four_finger.OBJECTS`): the policy runs on
+that object instead of its ``config.json``'s (its other env settings kept), from that
+object's test grasps; every output file carries the name (``eval_heldout_capsule.json``,
+``robustness_capsule.csv``, ``robustness_x0.25_capsule.csv``, ``eval_playground_capsule.json``)
+so that the policy's own stay. No shipped policy was trained on the held-out ``capsule`` and
+``ellipsoid`` (:data:`envs.four_finger.HELDOUT_OBJECTS`).
+
+**MuJoCo Playground's ranges** (``--ranges playground``, :data:`PLAYGROUND`): in place of the
+nominal evaluation, the protocol of Playground's LEAP-hand cube rotate-z task, whose
+published result (0.94 rad/s, 2.3 % drops) is printed beside this one: 128 episodes of 10 s,
+each under its own physics drawn uniformly from the random stream ``(--seed, episode)``
+(:meth:`PlaygroundPreset.draw`): the object's sliding friction coefficient 0.5-1.0 absolute
+(Playground sets its fingertips' to that; every contact pair of the object here has the
+nominal 1.0, :func:`nominal_friction`, so it is the env's friction scale x0.5-1.0), object
+mass and each servo gain x0.8-1.2, torsional friction nominal, no latency, and Gaussian
+joint-angle noise of std 0.029 rad (Playground adds uniform noise of +-0.05 rad; no contact
+noise). Episode ``g`` starts from test grasp ``g``: the test set is enlarged to 128 grasps by
+its own generator stream, whose first 100 are the usual ones; its sensor noise is seeded by
+``seed + g``. Writes ``eval_playground.json`` (:func:`evaluate_playground`).
 """
 
 from __future__ import annotations
