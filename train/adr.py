@@ -9,13 +9,19 @@ steps, looks at the training episodes that ended since its last decision:
 - drop rate ``> adr_narrow``: ``s -= adr_step`` (at least the starting scale);
 - otherwise, or with fewer than ``MIN_EPISODES`` episodes: ``s`` stays.
 
+With ``objects`` (a mixed-object run, :class:`envs.four_finger.MixedObjectRotate`) and an
+object share ``f > 0`` the same decision also sets the objects' draw: object ``o`` is drawn
+with probability ``(1 - f) / n + f d_o / sum(d)``, ``d_o`` its episodes' drop rate since the
+last decision (uniform when none dropped), so that the objects the policy drops are trained
+on more, and none less than ``(1 - f) / n``.
+
 It is the curriculum of OpenAI's ADR (Akkaya et al. 2019) on one scale for the four ranges
 (friction, torsional friction, mass, gains); latency and noise are drawn at their full
 values throughout. The decisions fall on multiples of ``adr_every`` steps, so a run that is
 stopped and resumed makes them at the same steps. The schedule is ``adr.json`` in the run
 directory: the current scale and one row per decision (steps, scale before and after,
-episodes, drop rate). A resumed run reads it back, dropping the decisions made after the
-checkpoint it resumes from.
+episodes, drop rate; with objects each one's episodes, drop rate and the weights set). A
+resumed run reads it back, dropping the decisions made after the checkpoint it resumes from.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from envs.four_finger import Randomization
 
-__all__ = ["MIN_EPISODES", "AdrCallback", "AdrState", "next_scale"]
+__all__ = ["MIN_EPISODES", "AdrCallback", "AdrState", "next_scale", "object_weights"]
 
 MIN_EPISODES = 16  # episodes a decision needs; with fewer the scale stays
 
@@ -73,10 +79,25 @@ def next_scale(
     return scale
 
 
+def object_weights(
+    drops: dict[str, int], episodes: dict[str, int], share: float
+) -> dict[str, float]:
+    """The objects' draw probabilities (module doc): ``(1 - share) / n + share d_o / sum(d)``
+    with ``d_o = drops[o] / episodes[o]`` (0 for an object without episodes); uniform when
+    no object dropped."""
+    rate = {o: drops.get(o, 0) / e if (e := episodes.get(o, 0)) else 0.0 for o in episodes}
+    total, n = sum(rate.values()), len(rate)
+    if total <= 0:
+        return {o: 1.0 / n for o in rate}
+    return {o: (1.0 - share) / n + share * r / total for o, r in rate.items()}
+
+
 class AdrCallback(BaseCallback):
     """Widens or narrows the training envs' ranges (module doc). ``base``: the full ranges
     and sampling probabilities; ``start``: the first scale; ``every`` [env steps]; ``step``,
-    ``widen``, ``narrow``: :func:`next_scale`; the state lives in ``run_dir/adr.json``.
+    ``widen``, ``narrow``: :func:`next_scale`; ``objects`` and ``object_share``: the object
+    curriculum (:func:`object_weights`; none without objects or with share 0); the state
+    lives in ``run_dir/adr.json``.
     The envs must have ``set_randomization`` (:class:`envs.four_finger.FourFingerRotate`,
     :class:`envs.four_finger.MixedObjectRotate`)."""
 
@@ -89,8 +110,13 @@ class AdrCallback(BaseCallback):
         widen: float,
         narrow: float,
         run_dir: Path,
+        objects: tuple[str, ...] = (),
+        object_share: float = 0.0,
     ) -> None:
         super().__init__()
+        self.objects = tuple(objects) if object_share > 0 else ()
+        self.share = object_share
+        self.per_object = {o: [0, 0] for o in self.objects}  # episodes, drops
         self.base, self.start, self.every = base, start, int(every)
         self.step, self.widen, self.narrow = step, widen, narrow
         self.path = Path(run_dir) / "adr.json"
@@ -105,6 +131,9 @@ class AdrCallback(BaseCallback):
     def _apply(self) -> None:
         self.training_env.env_method("set_randomization", self.ranges())
         self.logger.record("adr/scale", self.state.scale)
+        weights = self.state.history[-1].get("weights") if self.state.history else None
+        if self.objects and weights:
+            self.training_env.env_method("set_object_weights", weights)
 
     def _on_training_start(self) -> None:
         self.state = AdrState.load(self.path, self.start, self.num_timesteps)
@@ -115,8 +144,12 @@ class AdrCallback(BaseCallback):
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
             if done:
+                dropped = bool(info.get("dropped", False))
                 self.episodes += 1
-                self.drops += bool(info.get("dropped", False))
+                self.drops += dropped
+                if info.get("object") in self.per_object:
+                    self.per_object[info["object"]][0] += 1
+                    self.per_object[info["object"]][1] += dropped
         return True
 
     def _on_rollout_end(self) -> None:
@@ -131,8 +164,17 @@ class AdrCallback(BaseCallback):
             "steps": int(self.num_timesteps), "scale_before": before, "scale": after,
             "episodes": self.episodes, "drop_rate": None if rate is None else round(rate, 4),
         })  # fmt: skip
+        row = self.state.history[-1]
+        if self.objects:
+            eps = {o: v[0] for o, v in self.per_object.items()}
+            drops = {o: v[1] for o, v in self.per_object.items()}
+            row["objects"] = {o: [eps[o], round(drops[o] / eps[o], 4) if eps[o] else None]
+                              for o in self.objects}  # fmt: skip
+            row["weights"] = {
+                o: round(w, 4) for o, w in object_weights(drops, eps, self.share).items()
+            }
+            self.per_object = {o: [0, 0] for o in self.objects}
         self.state.scale = after
         self.episodes = self.drops = 0
-        if after != before:
-            self._apply()
+        self._apply()
         self.state.save(self.path)

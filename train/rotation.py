@@ -400,7 +400,8 @@ class RotationTask(Task):
         rnd = cfg.randomization
         if rnd.randomize and rnd.adr_step:
             adr = (rnd.adr_every, rnd.adr_step, rnd.adr_widen, rnd.adr_narrow)
-            out.append(AdrCallback(rnd.full_ranges(), rnd.range_scale, *adr, run_dir))
+            objects = (tuple(cfg.objects), rnd.object_share)
+            out.append(AdrCallback(rnd.full_ranges(), rnd.range_scale, *adr, run_dir, *objects))
         return [*out, RolloutThreads(cfg.threads)] if cfg.workers else out
 
     def evaluate(self, run: Run, train_seconds: float) -> dict[str, Any]:

@@ -72,6 +72,7 @@ GENERALIST: dict[str, Any] = {
     "randomize": True,
     "range_scale": 0.25,
     "adr_step": 0.125,
+    "object_share": 0.5,
     "corner_prob": 0.25,
     "grip": "firm",
     "history": 3,
@@ -115,6 +116,7 @@ class TrainingRandomization:
     adr_every: int = 122_880
     adr_widen: float = 0.10
     adr_narrow: float = 0.25
+    object_share: float = 0.0
 
     def full_ranges(self) -> Randomization:
         """The ranges at scale 1 with the config's sampling probabilities (what ADR widens
@@ -257,6 +259,10 @@ class RotateConfig:
             "with --adr-step: widen when the training episodes' drop rate is at most this"
         ),
         adr_narrow=Flag("with --adr-step: narrow when the drop rate is above this"),
+        object_share=Flag(
+            "with --adr-step and --objects: object curriculum, the share of the objects' draw "
+            "given in proportion to their drop rates (train.adr); 0: uniform"
+        ),
     )
     starts: StartSettings = group(
         StartSettings(),
@@ -378,6 +384,8 @@ def config_problems(cfg: RotateConfig) -> list[str]:
     if rnd.adr_step:
         if not (0 < rnd.adr_step <= 1 and rnd.adr_every >= 1 and rnd.randomize):
             problems.append("--adr-step must be in (0, 1] with --randomize, --adr-every >= 1")
+        if not 0 <= rnd.object_share < 1:
+            problems.append("--object-share must be in [0, 1)")
         if not 0 <= rnd.adr_widen <= rnd.adr_narrow <= 1:
             problems.append("--adr-widen and --adr-narrow must satisfy 0 <= widen <= narrow <= 1")
     if cfg.validate_corners < 0:

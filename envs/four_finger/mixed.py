@@ -1,11 +1,12 @@
 """One rotation env over several objects: ``ihm/FourFingerRotateMixed-v0``.
 
 :class:`MixedObjectRotate` holds one :class:`~envs.four_finger.env.FourFingerRotate` per
-object, all with the same settings, and at every reset draws the object of the episode
-uniformly from ``np_random``. The policy is not told which object it holds: the
-observation, the action and the reward are the drawn env's own (the spaces of every object
-are the same), so a policy has to tell the sphere, the cylinder and the cube apart from
-what the hand senses. ``info["object"]`` names the drawn object for logging and
+object, all with the same settings, and at every reset draws the object of the episode from
+``np_random``, uniformly or with the weights of
+:meth:`MixedObjectRotate.set_object_weights`. The policy is not told which object it holds:
+the observation, the action and the reward are the drawn env's own (the spaces of every
+object are the same), so a policy has to tell the sphere, the cylinder and the cube apart
+from what the hand senses. ``info["object"]`` names the drawn object for logging and
 evaluation; ``options={"object": name}`` at a reset picks one.
 
 Each object's env keeps its own start grasps, failure replay buffer and randomised physics;
@@ -78,6 +79,7 @@ class MixedObjectRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.action_space = first.action_space
         self.render_mode = first.render_mode
         self.current = objects[0]
+        self.weights = np.full(len(objects), 1.0 / len(objects))
 
     @property
     def env(self) -> FourFingerRotate:
@@ -96,6 +98,18 @@ class MixedObjectRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def dt(self) -> float:
         return self.env.dt
 
+    def set_object_weights(self, weights: dict[str, float]) -> None:
+        """Draw the objects of the next episodes with probabilities proportional to
+        ``weights`` (object name -> weight >= 0, every object named, not all zero): an
+        object curriculum (``train.adr``). The default is uniform."""
+        w = np.array([float(weights.get(o, np.nan)) for o in self.objects])
+        if set(weights) != set(self.objects) or not np.all(w >= 0) or not w.sum() > 0:
+            raise FourFingerError(
+                f"object weights must name {self.objects} with weights >= 0, not all 0; "
+                f"got {weights!r}"
+            )
+        self.weights = w / w.sum()
+
     def set_randomization(self, randomize: Randomization) -> None:
         """Every object's :meth:`FourFingerRotate.set_randomization`."""
         for env in self.envs.values():
@@ -113,7 +127,7 @@ class MixedObjectRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         options = dict(options or {})
         obj = options.pop("object", None)
         if obj is None:
-            obj = self.objects[int(self.np_random.integers(len(self.objects)))]
+            obj = self.objects[int(self.np_random.choice(len(self.objects), p=self.weights))]
         elif obj not in self.envs:
             raise FourFingerError(f"options['object'] must be one of {self.objects}, got {obj!r}")
         self.current = obj

@@ -49,6 +49,20 @@ def test_the_object_is_drawn_per_episode_and_reproducibly(mixed) -> None:
         MixedObjectRotate(("sphere", "sphere"))
 
 
+def test_object_weights_set_the_draw() -> None:
+    """``set_object_weights``: an object of weight 0 is never drawn, the others in
+    proportion; weights that do not name every object, or are all zero, are refused."""
+    env = MixedObjectRotate(starts=SMALL)
+    env.set_object_weights({"sphere": 0.0, "cylinder": 1.0, "cube": 3.0})
+    env.reset(seed=0)
+    a = [env.reset()[1]["object"] for _ in range(200)]
+    assert "sphere" not in a and 0.6 < a.count("cube") / 200 < 0.9
+    for bad in ({"sphere": 1.0}, {"sphere": 0.0, "cylinder": 0.0, "cube": 0.0}):
+        with pytest.raises(FourFingerError, match="object weights"):
+            env.set_object_weights(bad)
+    env.close()
+
+
 def test_gym_make_builds_the_mixed_env() -> None:
     env = gym.make("ihm/FourFingerRotateMixed-v0", objects=("sphere", "cube"), starts=SMALL)
     _, info = env.reset(seed=0)

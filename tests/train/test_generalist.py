@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from envs.four_finger import TRAIN_OBJECTS
-from train.adr import MIN_EPISODES, AdrState, next_scale
+from train.adr import MIN_EPISODES, AdrState, next_scale, object_weights
 from train.rotation_config import GENERALIST, parse_config
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,6 +29,18 @@ def test_next_scale_widens_narrows_and_holds() -> None:
     assert next_scale(0.25, 90, 100, 0.125, 0.1, 0.25, 0.25) == 0.25
     assert next_scale(0.9375, 0, 100, 0.125, 0.1, 0.25, 0.25) == 1.0
     assert next_scale(0.5, 0, n - 1, 0.125, 0.1, 0.25, 0.25) == 0.5
+
+
+def test_object_weights_follow_the_drop_rates_with_a_floor() -> None:
+    """Half the draw uniform, half in proportion to the drop rates; uniform without drops;
+    an object without episodes counts as not dropping."""
+    eps = {"sphere": 100, "cylinder": 50, "cube": 50}
+    w = object_weights({"sphere": 0, "cylinder": 25, "cube": 50}, eps, 0.5)
+    assert w == pytest.approx({"sphere": 1 / 6, "cylinder": 1 / 6 + 0.5 / 3, "cube": 1 / 6 + 1 / 3})
+    assert sum(w.values()) == pytest.approx(1.0)
+    assert object_weights({}, eps, 0.5) == pytest.approx(dict.fromkeys(eps, 1 / 3))
+    w = object_weights({"cube": 5}, {"sphere": 0, "cube": 10}, 0.5)
+    assert w == pytest.approx({"sphere": 0.25, "cube": 0.75})
 
 
 def test_adr_state_drops_decisions_after_the_checkpoint(tmp_path) -> None:
@@ -78,7 +90,8 @@ def test_a_stopped_and_resumed_run_equals_an_uninterrupted_one(tmp_path) -> None
     schedule does not depend on which episodes dropped), the config kept."""
     tiny = [
         "--objects", *TRAIN_OBJECTS, "--randomize", "--range-scale", "0.25", "--adr-step",
-        "0.125", "--adr-every", "128", "--adr-widen", "1", "--adr-narrow", "1", "--n-envs", "2",
+        "0.125", "--adr-every", "128", "--adr-widen", "1", "--adr-narrow", "1", "--object-share",
+        "0.5", "--n-envs", "2",
         "--workers", "0", "--n-steps", "64", "--batch-size", "64", "--n-epochs", "1", "--pi",
         "16", "--vf", "16", "--history", "2", "--privileged-critic", "--episode-steps", "5",
         "--eval-episodes", "0", "--checkpoint-every", "256", "--no-progress",
@@ -96,6 +109,9 @@ def test_a_stopped_and_resumed_run_equals_an_uninterrupted_one(tmp_path) -> None
     assert key == [(h["steps"], h["scale_before"], h["scale"]) for h in b["history"]]
     assert key == [(128, 0.25, 0.375), (256, 0.375, 0.5), (384, 0.5, 0.625), (512, 0.625, 0.75)]
     assert a["scale"] == b["scale"] == 0.75
+    for h in a["history"] + b["history"]:  # the object curriculum's draw, each decision
+        assert set(h["weights"]) == set(TRAIN_OBJECTS) and sum(h["weights"].values()) > 0.99
+        assert min(h["weights"].values()) >= 0.5 / 3 - 1e-4
     res = [json.loads((d / "eval.json").read_text()) for d in (whole, split)]
     assert res[0]["num_timesteps"] == res[1]["num_timesteps"] == 512
     cfgs = [json.loads((d / "config.json").read_text()) for d in (whole, split)]
