@@ -62,7 +62,6 @@ import envs  # noqa: F401  (registers ihm/FourFingerRotate-v0)
 from envs.four_finger import (
     GRASP_SETS,
     N_OBS,
-    N_PRIVILEGED,
     PhysicsSample,
     Randomization,
     corners,
@@ -359,7 +358,7 @@ class RotationTask(Task):
         if cfg.init_from is None:
             return VecNormalize(vec, gamma=cfg.gamma)
         try:
-            priv = N_PRIVILEGED if cfg.observation.privileged else 0
+            priv = vec.observation_space.shape[0] - N_OBS * cfg.observation.history
             return init_normalizer(vec, Path(cfg.init_from), priv)
         except ValueError as e:
             vec.close()

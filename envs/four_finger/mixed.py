@@ -7,7 +7,10 @@ object, all with the same settings, and at every reset draws the object of the e
 the observation, the action and the reward are the drawn env's own (the spaces of every
 object are the same), so a policy has to tell the sphere, the cylinder and the cube apart
 from what the hand senses. ``info["object"]`` names the drawn object for logging and
-evaluation; ``options={"object": name}`` at a reset picks one.
+evaluation; ``options={"object": name}`` at a reset picks one. With ``privileged=True`` the
+critic's privileged state (after the env's own :data:`~envs.four_finger.N_PRIVILEGED`
+entries) ends with the object's one-hot code over ``objects``: a value net that does not
+know the object averages the sphere's long episodes with the cylinder's and cube's drops.
 
 Each object's env keeps its own start grasps, failure replay buffer and randomised physics;
 the settings are the env's groups (``reward``, ``sim``, ``starts``, ``observation``),
@@ -76,6 +79,14 @@ class MixedObjectRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             if env.observation_space != first.observation_space:
                 raise FourFingerError(f"{o}: its observation space differs from {objects[0]}'s")
         self.observation_space = first.observation_space
+        self._onehot = (
+            np.eye(len(objects), dtype=np.float32) if first.observation.privileged else None
+        )
+        if self._onehot is not None:
+            space = first.observation_space
+            lo = np.concatenate([space.low, np.zeros(len(objects), np.float32)])
+            hi = np.concatenate([space.high, np.ones(len(objects), np.float32)])
+            self.observation_space = gym.spaces.Box(lo, hi, dtype=np.float32)
         self.action_space = first.action_space
         self.render_mode = first.render_mode
         self.current = objects[0]
@@ -132,13 +143,19 @@ class MixedObjectRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise FourFingerError(f"options['object'] must be one of {self.objects}, got {obj!r}")
         self.current = obj
         obs, info = self.env.reset(options=options or None)
-        return obs, {**info, "object": obj}
+        return self._with_code(obs), {**info, "object": obj}
+
+    def _with_code(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        """``obs`` followed by the object's one-hot code when the critic is privileged."""
+        if self._onehot is None:
+            return obs
+        return np.concatenate([obs, self._onehot[self.objects.index(self.current)]])
 
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, terminated, truncated, {**info, "object": self.current}
+        return self._with_code(obs), reward, terminated, truncated, {**info, "object": self.current}
 
     def render(self) -> NDArray[np.uint8] | None:
         return self.env.render()

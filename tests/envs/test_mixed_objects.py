@@ -104,3 +104,23 @@ def test_start_grasps_hold_with_zero_actions(obj) -> None:
             _, _, terminated, _, _ = env.step(np.zeros(12, dtype=np.float32))
             assert not terminated, f"{obj} grasp {i} dropped"
     env.close()
+
+
+def test_the_privileged_critic_reads_the_object() -> None:
+    """With ``privileged=True`` the observation ends with the object's one-hot code (the
+    critic's only; the actor's frames are the drawn env's own), inside the space."""
+    from envs.four_finger import N_OBS, N_PRIVILEGED, ObservationSettings
+
+    env = MixedObjectRotate(
+        starts=SMALL, observation=ObservationSettings(history=2, privileged=True)
+    )
+    assert env.observation_space.shape == (2 * N_OBS + N_PRIVILEGED + 3,)
+    for k, obj in enumerate(TRAIN_OBJECTS):
+        obs, _ = env.reset(seed=k, options={"object": obj, "grasp": 0})
+        assert env.observation_space.contains(obs)
+        np.testing.assert_array_equal(obs[-3:], np.eye(3)[k])
+        own = env.envs[obj]._stacked(env.envs[obj]._sensed(), first=True)
+        np.testing.assert_array_equal(obs[: 2 * N_OBS], own[: 2 * N_OBS])
+        obs, *_ = env.step(np.zeros(12, dtype=np.float32))
+        np.testing.assert_array_equal(obs[-3:], np.eye(3)[k])
+    env.close()
