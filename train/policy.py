@@ -54,7 +54,9 @@ STATED_RANGES: dict[str, float] = {
 
 def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict[str, Any]]:
     """A deterministic ``obs -> action`` function and the keyword arguments of
-    ``FourFingerRotate`` that the policy runs in (:func:`policy_env`).
+    ``FourFingerRotate`` that the policy runs in (:func:`policy_env`). Of a policy with a
+    privileged critic the function reads only what the actor reads (the frames; the critic's
+    entries, which the actor masks, may be missing or of another object set).
 
     ``run_dir`` holds ``policy.pt`` (SB3 ``ActorCriticPolicy.save``) or ``model.zip``, plus
     ``vecnormalize.pkl`` (observation statistics, frozen) and ``config.json`` (either layout:
@@ -70,9 +72,12 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
     cfg = from_saved(RotateConfig, json.loads((run_dir / "config.json").read_text()))
     mean, var = norm.obs_rms.mean, norm.obs_rms.var
     clip, eps = norm.clip_obs, norm.epsilon
+    seen = int(getattr(policy, "actor_obs", len(mean)))  # what the actor reads of an observation
 
     def act(obs: np.ndarray) -> np.ndarray:
-        x = np.clip((obs - mean) / np.sqrt(var + eps), -clip, clip).astype(np.float32)
+        x = np.zeros((len(obs), len(mean)), dtype=np.float32)  # the critic's entries stay 0
+        m, v = mean[:seen], var[:seen]
+        x[:, :seen] = np.clip((obs[:, :seen] - m) / np.sqrt(v + eps), -clip, clip)
         a, _ = policy.predict(x, deterministic=True)
         return a
 

@@ -80,18 +80,19 @@ GENERALIST: dict[str, Any] = {
     "episode_steps": 200,
     "slip_weight": 10.0,
     "tilt_weight": 0.25,
-    "learning_rate": 1e-4,
+    "learning_rate": 5e-5,
     "lr_schedule": "constant",
     "total_steps": 20_000_000,
     "checkpoint_every": 245_760,
     "validate_corners": 1,
-    "init_from": "policies/four_finger_sphere_robust",
+    "init_from": "policies/four_finger_generalist/student",
 }
 """What ``--generalist`` (``python -m train.ppo generalist``) sets as the defaults: one policy
 for the sphere, the cylinder and the cube (drawn per episode), physics over the full
 ranges reached by automatic domain randomisation from a quarter of them (:mod:`train.adr`),
 three observed frames and an asymmetric critic, 10 s training episodes, started from the
-robust sphere policy. Options given beside it still apply."""
+student distilled from the three robust specialists (``python -m train.distill``). Options
+given beside it still apply."""
 
 
 @dataclass(frozen=True)

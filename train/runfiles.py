@@ -118,10 +118,14 @@ def init_normalizer(vec: VecEnv, source: Path, privileged: int = 0) -> VecNormal
     """``VecNormalize`` over ``vec`` that starts from the observation and return statistics of
     ``source`` (a run or policy directory), tiled over ``vec``'s frames when it observes
     more (``--history``); the last ``privileged`` entries, which the source did not observe,
-    start at mean 0, variance 1. The statistics go on updating."""
+    start at mean 0, variance 1; a source that observed what ``vec`` observes gives its
+    statistics as they are. The statistics go on updating."""
     with (policy_dir(Path(source)) / "vecnormalize.pkl").open("rb") as f:
         old = pickle.load(f)
     norm = VecNormalize(vec, gamma=old.gamma)
+    if old.obs_rms.mean.shape == norm.obs_rms.mean.shape:  # the same observation: as it is
+        norm.obs_rms, norm.ret_rms = old.obs_rms, old.ret_rms
+        return norm
     reps, rem = divmod(norm.obs_rms.mean.shape[0] - privileged, old.obs_rms.mean.shape[0])
     if rem or reps < 1:
         raise ValueError(f"--init-from {source}: observation sizes do not match")
