@@ -26,6 +26,7 @@ under that actor, and the fit's loss.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -166,19 +167,11 @@ def _fit(policy: Any, opt: torch.optim.Optimizer, norm: Any, x: np.ndarray, y: n
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
+    """``python -m train.distill [--FIELD VALUE ...]`` (the fields of :class:`DistillConfig`);
+    returns the policy directory."""
     p = ArgumentParser(prog="python -m train.distill", description=(__doc__ or "").split("\n\n")[0])
     d = DistillConfig()
-    for name in (
-        "iterations",
-        "steps",
-        "n_envs",
-        "epochs",
-        "batch",
-        "lr",
-        "range_scale",
-        "seed",
-        "out",
-    ):
+    for name in (f.name for f in dataclasses.fields(DistillConfig)):
         default = getattr(d, name)
         p.add_argument("--" + name.replace("_", "-"), type=type(default), default=default)
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
