@@ -93,6 +93,7 @@ from train.stats import wilson_interval
 __all__ = [
     "PLAYGROUND",
     "PlaygroundPreset",
+    "centre",
     "csv_path",
     "evaluate_heldout",
     "evaluate_playground",
@@ -270,6 +271,16 @@ def csv_path(out: Path, stem: str, range_scale: float = 1.0, obj: str | None = N
     its name follows: ``{stem}_{obj}.csv``, ``{stem}_xS_{obj}.csv``."""
     scale = "" if range_scale == 1.0 else f"_x{range_scale:g}"
     return out / f"{stem}{scale}{_tag(obj)}.csv"
+
+
+def centre(r: Randomization) -> PhysicsSample:
+    """The centre of ``r``'s ranges: friction, torsional friction and gain at the middle of
+    their ranges, mass at the geometric middle (the middle of its log-uniform draw), one step
+    of latency (if ``r`` allows any) and ``r``'s noise."""
+    noise = (r.noise_joint, r.noise_pos, r.noise_force)
+    mid = [sum(b) / 2 for b in (r.friction, r.torsional, r.gain)]
+    mass = math.sqrt(r.mass[0] * r.mass[1])
+    return PhysicsSample(mid[0], mid[1], mass, mid[2], int(r.latency_prob > 0), noise)
 
 
 def _tag(obj: str | None) -> str:
@@ -497,6 +508,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         "its own physics; eval_playground.json)",
     )
     p.add_argument("--seed", type=int, default=0, help="playground: seed of the physics draws")
+    p.add_argument(
+        "--centre",
+        action="store_true",
+        help="also at the centre of the ranges (every scale at its range's centre, mass "
+        "geometric, with latency and noise): eval_centre.json",
+    )
     p.add_argument("--out", default=None, help="directory for the outputs (default: policy)")
     a = p.parse_args(argv)
     playground = a.ranges == "playground"
@@ -536,6 +553,11 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     (out / f"eval_heldout{tag}.json").write_text(json.dumps(res, indent=2) + "\n")
     print(_line(f"{policy} ({kw['object']}) nominal", res))
     result: dict[str, Any] = {"nominal": res}
+    if a.centre:
+        res = evaluate_heldout(act, kw, episodes, seconds, physics=centre(ranges))
+        (out / f"eval_centre{tag}.json").write_text(json.dumps(res, indent=2) + "\n")
+        print(_line(f"{policy} ({kw['object']}) {centre(ranges).label()}", res))
+        result["centre"] = res
     for name, wanted, single in (("corners", a.corners, False), ("factors", a.factors, True)):
         if not wanted:
             continue

@@ -87,3 +87,17 @@ def test_object_option_names_the_output_files(tmp_path: Path) -> None:
     for bad in (["--corners"], ["--range-scale", "0.5"], ["--object", "torus"]):
         with pytest.raises(SystemExit):
             main([str(CYLINDER), "--ranges", "playground", *bad])
+
+
+def test_centre_of_the_ranges() -> None:
+    """``--centre``: each scale at its range's middle (the mass's geometric middle, where its
+    log-uniform draw is centred), with latency and the noise."""
+    from envs.four_finger import Randomization
+    from train.heldout import centre
+
+    c = centre(Randomization())
+    assert (c.friction, c.torsional, c.mass, c.gain, c.latency) == (1.0, 1.0, 1.0, 1.0, 1)
+    r = Randomization(friction=(0.5, 1.0), mass=(0.8, 1.2), latency_prob=0.0)
+    c = centre(r)
+    assert c.friction == 0.75 and c.mass == pytest.approx((0.8 * 1.2) ** 0.5) and c.latency == 0
+    assert c.noise == (r.noise_joint, r.noise_pos, r.noise_force)
