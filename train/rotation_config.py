@@ -80,6 +80,7 @@ GENERALIST: dict[str, Any] = {
     "episode_steps": 200,
     "slip_weight": 10.0,
     "tilt_weight": 0.25,
+    "drop_weight": 20.0,
     "learning_rate": 5e-5,
     "lr_schedule": "constant",
     "total_steps": 20_000_000,
