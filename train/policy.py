@@ -75,10 +75,11 @@ def load_policy(run_dir: Path) -> tuple[Callable[[np.ndarray], np.ndarray], dict
     seen = int(getattr(policy, "actor_obs", len(mean)))  # what the actor reads of an observation
 
     def act(obs: np.ndarray) -> np.ndarray:
-        x = np.zeros((len(obs), len(mean)), dtype=np.float32)  # the critic's entries stay 0
+        o = np.atleast_2d(obs)  # one observation or a batch
+        x = np.zeros((len(o), len(mean)), dtype=np.float32)  # the critic's entries stay 0
         m, v = mean[:seen], var[:seen]
-        x[:, :seen] = np.clip((obs[:, :seen] - m) / np.sqrt(v + eps), -clip, clip)
-        a, _ = policy.predict(x, deterministic=True)
+        x[:, :seen] = np.clip((o[:, :seen] - m) / np.sqrt(v + eps), -clip, clip)
+        a, _ = policy.predict(x[0] if np.ndim(obs) == 1 else x, deterministic=True)
         return a
 
     return act, policy_env(cfg)
