@@ -542,6 +542,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     out = Path(a.out) if a.out else policy
     out.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("MUJOCO_GL", "egl")
+    import torch
+
+    torch.set_num_threads(1)  # batches of 10 observations: more threads only spin
     act, kw = _load(policy, a.grip, a.still, a.object)
     tag = _tag(a.object)
     if playground:
