@@ -347,8 +347,8 @@ class RotationTask(Task):
         ``--init-from`` for a transfer, else fresh."""
         mon = run_dir / "monitor"
         mon.mkdir(exist_ok=True)
-        thunks = [
-            make_env(cfg, s, str(mon / str(i)), append=cfg.resume is not None)
+        thunks = [  # append to a resumed run's monitor files (a committed run has none)
+            make_env(cfg, s, str(mon / str(i)), append=(mon / f"{i}.monitor.csv").is_file())
             for i, s in enumerate(seeds.envs("train", cfg.n_envs))
         ]
         vec: VecEnv = make_vec_env(thunks, cfg.workers, parts=2 if cfg.pipeline else 1)
