@@ -78,6 +78,7 @@ from envs.four_finger import (
     Physics,
     PhysicsSample,
     Randomization,
+    centre,
     corners,
 )
 from ihm.hands.four_finger import NU
@@ -93,7 +94,6 @@ from train.stats import wilson_interval
 __all__ = [
     "PLAYGROUND",
     "PlaygroundPreset",
-    "centre",
     "csv_path",
     "evaluate_heldout",
     "evaluate_playground",
@@ -271,16 +271,6 @@ def csv_path(out: Path, stem: str, range_scale: float = 1.0, obj: str | None = N
     its name follows: ``{stem}_{obj}.csv``, ``{stem}_xS_{obj}.csv``."""
     scale = "" if range_scale == 1.0 else f"_x{range_scale:g}"
     return out / f"{stem}{scale}{_tag(obj)}.csv"
-
-
-def centre(r: Randomization) -> PhysicsSample:
-    """The centre of ``r``'s ranges: friction, torsional friction and gain at the middle of
-    their ranges, mass at the geometric middle (the middle of its log-uniform draw), one step
-    of latency (if ``r`` allows any) and ``r``'s noise."""
-    noise = (r.noise_joint, r.noise_pos, r.noise_force)
-    mid = [sum(b) / 2 for b in (r.friction, r.torsional, r.gain)]
-    mass = math.sqrt(r.mass[0] * r.mass[1])
-    return PhysicsSample(mid[0], mid[1], mass, mid[2], int(r.latency_prob > 0), noise)
 
 
 def _tag(obj: str | None) -> str:
@@ -557,9 +547,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     print(_line(f"{policy} ({kw['object']}) nominal", res))
     result: dict[str, Any] = {"nominal": res}
     if a.centre:
-        res = evaluate_heldout(act, kw, episodes, seconds, physics=centre(ranges))
+        mid = centre(ranges)
+        res = evaluate_heldout(act, kw, episodes, seconds, physics=mid)
         (out / f"eval_centre{tag}.json").write_text(json.dumps(res, indent=2) + "\n")
-        print(_line(f"{policy} ({kw['object']}) {centre(ranges).label()}", res))
+        print(_line(f"{policy} ({kw['object']}) {mid.label()}", res))
         result["centre"] = res
     for name, wanted, single in (("corners", a.corners, False), ("factors", a.factors, True)):
         if not wanted:

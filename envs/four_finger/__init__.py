@@ -67,7 +67,13 @@ from envs.four_finger.physics import (
     mixed_contact,
     scene_name,
 )
-from envs.four_finger.randomize import ModelScaler, PhysicsSample, Randomization, corners
+from envs.four_finger.randomize import (
+    ModelScaler,
+    PhysicsSample,
+    Randomization,
+    centre,
+    corners,
+)
 from envs.four_finger.settings import (
     ObservationSettings,
     RenderSettings,
@@ -118,6 +124,7 @@ __all__ = [
     "SimSettings",
     "StartSettings",
     "apply_overrides",
+    "centre",
     "check_start_sampling",
     "corners",
     "cube_turn",

@@ -365,12 +365,19 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._net = 0.0
         self._renderer: Any = None
         self.randomize = randomize
-        self.scaler = None
-        if randomize is not None or physics is not None:
-            self.scaler = ModelScaler(self.model, self.data, self.physics.obj_body)
-            if physics is not None:
-                self.scaler.apply(physics)
+        self.scaler: ModelScaler | None = None
+        if randomize is not None:
+            self._scaled()
+        if physics is not None:
+            self._scaled().apply(physics)
         self._prev_action = np.zeros(ff.NU)
+
+    def _scaled(self) -> ModelScaler:
+        """The model's :class:`ModelScaler`, made on first use (an env on nominal physics
+        needs none)."""
+        if self.scaler is None:
+            self.scaler = ModelScaler(self.model, self.data, self.physics.obj_body)
+        return self.scaler
 
     def set_randomization(self, randomize: Randomization) -> None:
         """Draw the physics of the episodes from the next reset on from ``randomize`` (a
@@ -378,8 +385,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         keeps its physics."""
         if not isinstance(randomize, Randomization):
             raise FourFingerError(f"set_randomization takes a Randomization, got {randomize!r}")
-        if self.scaler is None:
-            self.scaler = ModelScaler(self.model, self.data, self.physics.obj_body)
+        self._scaled()
         self.randomize = randomize
 
     @property
@@ -521,9 +527,7 @@ class FourFingerRotate(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if given is not None:
             if not isinstance(given, PhysicsSample):
                 raise FourFingerError(f"options['physics'] must be a PhysicsSample, got {given!r}")
-            if self.scaler is None:
-                self.scaler = ModelScaler(m, d, self.physics.obj_body)
-            self.scaler.apply(given)
+            self._scaled().apply(given)
         elif self.randomize is not None:  # a replayed start keeps its physics (never None here)
             s = replay[1] if replay is not None else self.randomize.sample(self.np_random, ff.NU)
             self.scaler.apply(s)  # type: ignore[union-attr, arg-type]

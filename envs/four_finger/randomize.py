@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from envs.four_finger.physics import FourFingerError
 
-__all__ = ["ModelScaler", "PhysicsSample", "Randomization", "corners"]
+__all__ = ["ModelScaler", "PhysicsSample", "Randomization", "centre", "corners"]
 
 
 @dataclass(frozen=True)
@@ -155,16 +155,32 @@ class PhysicsSample:
         )
 
 
+def _case(
+    r: Randomization, friction: float, torsional: float, mass: float, gain: float
+) -> PhysicsSample:
+    """One evaluation case of ``r``: the scales given, one step of latency (if ``r`` allows
+    any) and ``r``'s noise."""
+    noise = (r.noise_joint, r.noise_pos, r.noise_force)
+    return PhysicsSample(friction, torsional, mass, gain, int(r.latency_prob > 0), noise)
+
+
 def corners(r: Randomization | None = None) -> list[PhysicsSample]:
     """The ``2^4`` corners of ``r``'s friction, torsional, mass and gain ranges, each with one
     step of latency (if ``r`` allows any) and ``r``'s noise."""
     r = r or Randomization()
-    lat = int(r.latency_prob > 0)
-    noise = (r.noise_joint, r.noise_pos, r.noise_force)
     return [
-        PhysicsSample(f, t, m, g, lat, noise)
+        _case(r, f, t, m, g)
         for f, t, m, g in itertools.product(r.friction, r.torsional, r.mass, r.gain)
     ]
+
+
+def centre(r: Randomization | None = None) -> PhysicsSample:
+    """The centre of ``r``'s ranges: friction, torsional friction and gain at the middle of
+    their ranges, mass at the geometric middle (the middle of its log-uniform draw), with
+    latency and noise as at the :func:`corners`."""
+    r = r or Randomization()
+    mid = [sum(b) / 2 for b in (r.friction, r.torsional, r.gain)]
+    return _case(r, mid[0], mid[1], math.sqrt(r.mass[0] * r.mass[1]), mid[2])
 
 
 class ModelScaler:

@@ -92,8 +92,7 @@ def test_object_option_names_the_output_files(tmp_path: Path) -> None:
 def test_centre_of_the_ranges() -> None:
     """``--centre``: each scale at its range's middle (the mass's geometric middle, where its
     log-uniform draw is centred), with latency and the noise."""
-    from envs.four_finger import Randomization
-    from train.heldout import centre
+    from envs.four_finger import Randomization, centre
 
     c = centre(Randomization())
     assert (c.friction, c.torsional, c.mass, c.gain, c.latency) == (1.0, 1.0, 1.0, 1.0, 1)
