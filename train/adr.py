@@ -27,6 +27,7 @@ resumed run reads it back, dropping the decisions made after the checkpoint it r
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from envs.four_finger import Randomization
+from train.rotation_config import TrainingRandomization
 
 __all__ = ["MIN_EPISODES", "AdrCallback", "AdrState", "next_scale", "object_weights"]
 
@@ -93,34 +95,26 @@ def object_weights(
 
 
 class AdrCallback(BaseCallback):
-    """Widens or narrows the training envs' ranges (module doc). ``base``: the full ranges
-    and sampling probabilities; ``start``: the first scale; ``every`` [env steps]; ``step``,
-    ``widen``, ``narrow``: :func:`next_scale`; ``objects`` and ``object_share``: the object
-    curriculum (:func:`object_weights`; none without objects or with share 0); the state
-    lives in ``run_dir/adr.json``.
-    The envs must have ``set_randomization`` (:class:`envs.four_finger.FourFingerRotate`,
-    :class:`envs.four_finger.MixedObjectRotate`)."""
+    """Widens or narrows the training envs' ranges (module doc) as ``settings`` say: the full
+    ranges and sampling probabilities (:meth:`TrainingRandomization.full_ranges`), the first
+    scale ``range_scale``, ``adr_every`` [env steps], ``adr_step``, ``adr_widen`` and
+    ``adr_narrow`` (:func:`next_scale`), and with ``objects`` the object curriculum's
+    ``object_share`` (:func:`object_weights`; none without objects or with share 0); the
+    state lives in ``run_dir/adr.json``. The envs must have ``set_randomization``
+    (:class:`envs.four_finger.FourFingerRotate`, :class:`envs.four_finger.MixedObjectRotate`)."""
 
     def __init__(
-        self,
-        base: Randomization,
-        start: float,
-        every: int,
-        step: float,
-        widen: float,
-        narrow: float,
-        run_dir: Path,
-        objects: tuple[str, ...] = (),
-        object_share: float = 0.0,
+        self, settings: TrainingRandomization, objects: Sequence[str], run_dir: Path
     ) -> None:
         super().__init__()
-        self.objects = tuple(objects) if object_share > 0 else ()
-        self.share = object_share
+        self.share = settings.object_share
+        self.objects = tuple(objects) if self.share > 0 else ()
         self.per_object = {o: [0, 0] for o in self.objects}  # episodes, drops
-        self.base, self.start, self.every = base, start, int(every)
-        self.step, self.widen, self.narrow = step, widen, narrow
+        self.base, self.start = settings.full_ranges(), settings.range_scale
+        self.every, self.step = int(settings.adr_every), settings.adr_step
+        self.widen, self.narrow = settings.adr_widen, settings.adr_narrow
         self.path = Path(run_dir) / "adr.json"
-        self.state = AdrState(start)
+        self.state = AdrState(self.start)
         self.episodes = self.drops = 0
         self.next = 0
 

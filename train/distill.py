@@ -26,7 +26,6 @@ under that actor, and the fit's loss.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,13 +36,11 @@ import numpy as np
 import torch
 
 from envs.four_finger import N_OBS, TRAIN_OBJECTS
-from stability.cli import ArgumentParser
 from stability.io import write_csv
-from train.options import to_json
+from train.options import build_parser, from_options, opt, to_json
 from train.policy import ROOT, load_policy
-from train.rotation import build_model, make_env
+from train.rotation import TASK, make_env, transfer_normalizer
 from train.rotation_config import parse_config
-from train.runfiles import init_normalizer, init_weights
 from train.sb3 import seed_everything
 from train.seeding import RunSeeds
 from train.vec import make_vec_env
@@ -56,28 +53,28 @@ TEACHERS = {o: ROOT / "policies" / f"four_finger_{o}_robust" for o in TRAIN_OBJE
 
 @dataclass(frozen=True)
 class DistillConfig:
-    """``iterations`` of DAgger with ``steps`` env steps each over ``n_envs`` envs stepped by
-    ``workers`` processes (:func:`train.vec.make_vec_env`), the fit
-    ``epochs`` passes of minibatches of ``batch`` at learning rate ``lr``; the physics at
-    ``range_scale`` of the full ranges; ``seed`` the run's seed; ``out`` the directory."""
+    """The distillation's settings (module doc), one option of ``python -m train.distill``
+    each; the defaults made ``policies/four_finger_generalist/student``."""
 
-    iterations: int = 6
-    steps: int = 40_960
-    n_envs: int = 16
-    workers: int = 2
-    epochs: int = 6
-    batch: int = 1024
-    lr: float = 3e-4
-    range_scale: float = 0.25
-    seed: int = 1
-    out: str = "runs/distill"
+    iterations: int = opt(8, "DAgger iterations (the first acted by the teachers)")
+    steps: int = opt(40_960, "env steps per iteration")
+    n_envs: int = opt(16, "envs")
+    workers: int = opt(2, "processes that step the envs (train.vec); 0: in this one")
+    epochs: int = opt(6, "passes over all labels so far per fit")
+    batch: int = opt(1024, "minibatch size of the fit")
+    lr: float = opt(3e-4, "Adam learning rate of the fit")
+    range_scale: float = opt(0.25, "the physics ranges' share of the full ranges (in (0, 1])")
+    seed: int = opt(1, "run seed")
+    out: str = opt("runs/distill", "the policy directory written")
 
 
 def _student_config(c: DistillConfig) -> Any:
-    """The generalist's config for the student (its nets, observation, env settings)."""
+    """The generalist's config for the student (its nets, observation, env settings),
+    starting from the sphere teacher (its actor and critic widened to the student's
+    observation)."""
     return parse_config(["--generalist", "--range-scale", str(c.range_scale), "--n-envs",
                          str(c.n_envs), "--seed", str(c.seed), "--adr-step", "0",
-                         "--no-progress"])  # fmt: skip
+                         "--init-from", str(TEACHERS["sphere"]), "--no-progress"])  # fmt: skip
 
 
 def distill(c: DistillConfig) -> Path:
@@ -88,11 +85,9 @@ def distill(c: DistillConfig) -> Path:
     seeds = RunSeeds(cfg.seed)
     seed_everything(seeds.global_seed)
     vec = make_vec_env([make_env(cfg, s) for s in seeds.envs("train", c.n_envs)], c.workers)
-    priv = vec.observation_space.shape[0] - N_OBS * cfg.observation.history
-    norm = init_normalizer(vec, TEACHERS["sphere"], priv)
+    norm = transfer_normalizer(cfg, vec)
     norm.norm_reward = False
-    model = build_model(cfg, norm)
-    init_weights(model, TEACHERS["sphere"])
+    model = TASK.new_model(cfg, norm)
     teachers = [load_policy(TEACHERS[o])[0] for o in cfg.objects]
     policy = model.policy
     actor = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
@@ -124,10 +119,10 @@ def distill(c: DistillConfig) -> Path:
                     eps[info["object"]][1] += bool(info.get("dropped"))
         loss = _fit(policy, opt, norm, np.concatenate(xs), np.concatenate(ys), c, rng)
         row: dict[str, Any] = {
-            "iteration": it, "steps": (it + 1) * c.steps, "actor": "student",
+            "iteration": it, "steps": (it + 1) * c.steps,
+            "actor": "teacher" if teacher_acts else "student",
             "samples": sum(len(x) for x in xs), "loss": round(loss, 5),
         }  # fmt: skip
-        row["actor"] = "teacher" if teacher_acts else "student"
         for o, (n, d) in eps.items():
             row[f"{o}_episodes"], row[f"{o}_drop_rate"] = n, round(d / n, 4) if n else None
         rows.append(row)
@@ -167,16 +162,13 @@ def _fit(policy: Any, opt: torch.optim.Optimizer, norm: Any, x: np.ndarray, y: n
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
-    """``python -m train.distill [--FIELD VALUE ...]`` (the fields of :class:`DistillConfig`);
+    """``python -m train.distill [--OPTION VALUE ...]`` (the fields of :class:`DistillConfig`);
     returns the policy directory."""
-    p = ArgumentParser(prog="python -m train.distill", description=(__doc__ or "").split("\n\n")[0])
-    d = DistillConfig()
-    for name in (f.name for f in dataclasses.fields(DistillConfig)):
-        default = getattr(d, name)
-        p.add_argument("--" + name.replace("_", "-"), type=type(default), default=default)
+    p = build_parser(DistillConfig, prog="python -m train.distill",
+                     description=(__doc__ or "").split("\n\n")[0])  # fmt: skip
     a = p.parse_args(sys.argv[1:] if argv is None else argv)
     torch.set_num_threads(1)
-    return distill(DistillConfig(**vars(a)))
+    return distill(from_options(DistillConfig, vars(a)))
 
 
 if __name__ == "__main__":

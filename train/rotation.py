@@ -128,6 +128,7 @@ __all__ = [
     "policy_dir",
     "steps_label",
     "training_randomization",
+    "transfer_normalizer",
     "validation_key",
 ]
 
@@ -200,6 +201,15 @@ def build_model(cfg: RotateConfig, vec_env: VecEnv) -> PPO:
     obs = cfg.observation
     actor_obs = N_OBS * obs.history if obs.privileged else None
     return new_ppo(cfg, vec_env, learning_rate(cfg), algo=PipelinedPPO, actor_obs=actor_obs)
+
+
+def transfer_normalizer(cfg: RotateConfig, vec: VecEnv) -> VecNormalize:
+    """``vec`` normalised from the statistics of ``cfg.init_from``
+    (:func:`train.runfiles.init_normalizer`): the observation's entries after its
+    ``history`` frames are the critic's privileged state, which the source may not have
+    observed."""
+    priv = vec.observation_space.shape[0] - N_OBS * cfg.observation.history
+    return init_normalizer(vec, Path(str(cfg.init_from)), priv)
 
 
 def validation_key(res: dict[str, Any]) -> tuple[bool, float]:
@@ -358,8 +368,7 @@ class RotationTask(Task):
         if cfg.init_from is None:
             return VecNormalize(vec, gamma=cfg.gamma)
         try:
-            priv = vec.observation_space.shape[0] - N_OBS * cfg.observation.history
-            return init_normalizer(vec, Path(cfg.init_from), priv)
+            return transfer_normalizer(cfg, vec)
         except ValueError as e:
             vec.close()
             raise SystemExit(f"python -m train.ppo: error: {e}") from None
@@ -396,11 +405,8 @@ class RotationTask(Task):
     ) -> list[BaseCallback]:
         ev = EvalCallback(cfg, run_dir, evals.validation, cfg.checkpoint_every, evals.corners)
         out: list[BaseCallback] = [ev]
-        rnd = cfg.randomization
-        if rnd.randomize and rnd.adr_step:
-            adr = (rnd.adr_every, rnd.adr_step, rnd.adr_widen, rnd.adr_narrow)
-            objects = (tuple(cfg.objects), rnd.object_share)
-            out.append(AdrCallback(rnd.full_ranges(), rnd.range_scale, *adr, run_dir, *objects))
+        if cfg.randomization.randomize and cfg.randomization.adr_step:
+            out.append(AdrCallback(cfg.randomization, cfg.objects, run_dir))
         return [*out, RolloutThreads(cfg.threads)] if cfg.workers else out
 
     def evaluate(self, run: Run, train_seconds: float) -> dict[str, Any]:
