@@ -40,6 +40,7 @@ def test_a_tiny_distillation_writes_a_policy_that_starts_the_generalist(tmp_path
     src = load_actor_critic(out).state_dict()
     for k, v in model.policy.state_dict().items():
         assert torch.equal(v, src[k]), k
+    norm.training = False  # frozen statistics, as load_policy's: a reset does not update them
     obs = norm.reset()
     a = model.policy.predict(obs, deterministic=True)[0]
     np.testing.assert_allclose(a[0], act(norm.get_original_obs())[0], atol=1e-6)
