@@ -94,6 +94,7 @@ from .handmodel import (
     transmission,
 )
 from .near import near_contacts, widened
+from .contact_law import LAW_SPAN, law_pieces
 from .patches import ContactGroup, merge_contacts, reduce_patches
 
 __all__ = [
@@ -153,7 +154,12 @@ class MujocoSource:
         whose displacement :mod:`ihm.resistance` measures)
     gaps : (m,) per contact how far it is from engaging [m]: 0 for a touching contact, the
         gap of a near contact (``grasp_from_mujoco(near=)``, :mod:`ihm.near`)
-    near : (m,) booleans, True for a near contact (no MuJoCo contact behind it)
+    near : (m,) booleans, True for a near contact (no MuJoCo contact behind it) and for
+        the pieces of one
+    piece_of : (m,) per contact the contact whose fitted law it is a piece of
+        (``grasp_from_mujoco(contact_law="fitted")``, :mod:`ihm.contact_law`): its own
+        index for a contact read off MuJoCo, the base contact's for a piece, which has the
+        base's point and frame, no force and the gap where its step of the law starts
     """
 
     forces: NDArray[np.float64]
@@ -169,6 +175,7 @@ class MujocoSource:
     object_com: NDArray[np.float64]
     gaps: NDArray[np.float64] | None = None
     near: NDArray[np.bool_] | None = None
+    piece_of: NDArray[np.int64] | None = None
 
 
 class _FromSource:
@@ -215,6 +222,7 @@ class SceneGrasp(Grasp):
     object_com = _FromSource()
     gaps = _FromSource()
     near = _FromSource()
+    piece_of = _FromSource()
 
     def __init__(self, *, source: MujocoSource, **grasp: Any) -> None:
         """``grasp``: :class:`stability.Grasp`'s arguments; ``source``: the MuJoCo record."""
@@ -419,9 +427,16 @@ def _read(
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
         k = float(contact_stiffness(model, data, [i], span)[0]) if stiffness else 0.0
+        law = (*(float(v) for v in con.solimp[:5]), _depth(data, i)) if stiffness else ()
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
-                                frame, frame.T @ force, mu, [i], k))  # fmt: skip
+                                frame, frame.T @ force, mu, [i], k, law))  # fmt: skip
     return out
+
+
+def _depth(data: mujoco.MjData, i: int) -> float:
+    """How far MuJoCo contact ``i`` presses into its margin [m] (0 when it does not)."""
+    j = int(data.contact[i].efc_address)
+    return max(0.0, float(data.efc_margin[j] - data.efc_pos[j]))
 
 
 def grasp_from_mujoco(
@@ -437,6 +452,7 @@ def grasp_from_mujoco(
     compliance: str = "unit",
     near: float = 0.0,
     contact_span: float = 0.0,
+    contact_law: str = "slope",
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
 
@@ -495,6 +511,11 @@ def grasp_from_mujoco(
     if not (isinstance(contact_span, (int, float)) and np.isfinite(contact_span)
             and contact_span >= 0):  # fmt: skip
         raise GraspError(f"contact_span must be a finite number >= 0 [m], got {contact_span!r}")
+    if contact_law not in ("slope", "fitted"):
+        raise GraspError(f"contact_law must be 'slope' or 'fitted', got {contact_law!r}")
+    if contact_law == "fitted" and (compliance != "mujoco" or contact_span > 0):
+        raise GraspError("contact_law='fitted' needs compliance='mujoco' and no contact_span: "
+                         "it fits MuJoCo's own law from the slope at the state")  # fmt: skip
     if (near > 0 or contact_span > 0) and compliance != "mujoco":
         raise GraspError("near contacts and contact_span need compliance='mujoco': a length "
                          "in metres has no meaning for the thesis' unit springs")  # fmt: skip
@@ -522,6 +543,11 @@ def grasp_from_mujoco(
         groups = groups + extra
         n_near = len(extra)
         gaps = np.r_[gaps, extra_gaps]
+    is_near = np.arange(len(groups)) >= len(groups) - n_near
+    owner = np.arange(len(groups))
+    if contact_law == "fitted":
+        groups, gaps, owner = law_pieces(groups, gaps, LAW_SPAN)
+        is_near = is_near[owner]
 
     ho = HandOptions() if hand is None else hand
     hm = hand_model(model, data, in_obj, backdrivable=ho.backdrivable, servo=ho.servo,
@@ -557,7 +583,8 @@ def grasp_from_mujoco(
         object_mat=R_o,
         object_com=R_o.T @ (data.xipos[obj] - x_o),
         gaps=gaps,
-        near=np.arange(len(groups)) >= len(groups) - n_near,
+        near=is_near,
+        piece_of=owner,
     )
     physical = (dict(stiffness=[g.stiffness for g in groups], actuator_stiffness=hm.stiffness,
                      stop_gap=hm.gaps) if mj else {})  # fmt: skip

@@ -37,7 +37,9 @@ class ContactGroup:
     ``n`` into the object; ``force_world``: the summed force of the hand on the object
     [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices;
     ``stiffness``: the normal stiffness of the springs it stands for [N/m] (module
-    docstring; 0 where not computed)."""
+    docstring; 0 where not computed); ``law``: MuJoCo's static law of the first contact,
+    its ``solimp`` (5 numbers) and its depth into the margin [m] (:mod:`ihm.contact_law`;
+    empty where not read)."""
 
     pair: tuple[int, int]
     bodies: tuple[int, int]
@@ -47,6 +49,7 @@ class ContactGroup:
     mu: float
     ids: list[int]
     stiffness: float = 0.0
+    law: tuple[float, ...] = ()
 
 
 def merge_contacts(contacts: list[ContactGroup], merge_tol: float) -> list[ContactGroup]:

@@ -89,7 +89,10 @@ class MapSpec:
     object's centre of mass within ``shift`` and its rotation within ``turn`` of the settled
     state (None: the simulated ramp's 2 mm and 0.05 rad, :func:`scene_disturbance`);
     ``near`` [m]: with ``"mujoco"``, hand geoms this close to the object that do not touch it
-    become contacts at their gap (:mod:`ihm.near`; 0: none)."""
+    become contacts at their gap (:mod:`ihm.near`; 0: none); ``contact_law``: with
+    ``"mujoco"``, ``"slope"`` (each contact a linear spring of its slope at the state) or
+    ``"fitted"`` (MuJoCo's static law as a convex piecewise-linear spring,
+    :mod:`ihm.contact_law`)."""
 
     scene: str
     plane: str = "xy"
@@ -104,6 +107,7 @@ class MapSpec:
     compliance: str = "unit"
     motion_limit: tuple[float, float] | None = None
     near: float = 0.0
+    contact_law: str = "slope"
 
     def check(self, method: str, workers: int = 1) -> None:
         """:func:`check_options` on this map, for ``method`` on ``workers`` processes, and its
@@ -122,6 +126,10 @@ class MapSpec:
             raise MapError(f"near must be a finite number >= 0 [m], got {self.near!r}")
         if self.near > 0 and self.compliance != "mujoco":
             raise MapError("near is a distance in metres: it needs compliance 'mujoco'")
+        if self.contact_law not in ("slope", "fitted"):
+            raise MapError(f"contact_law must be 'slope' or 'fitted', got {self.contact_law!r}")
+        if self.contact_law == "fitted" and self.compliance != "mujoco":
+            raise MapError("contact_law 'fitted' is MuJoCo's law: it needs compliance 'mujoco'")
 
     @property
     def label(self) -> str:
@@ -330,8 +338,9 @@ def scene_preload(grasp: Any) -> np.ndarray | None:
     if not grasp.compliant:
         return None
     preload = grasp.forces[:, 0].copy()
-    if grasp.near is not None and np.any(grasp.near):
-        preload[grasp.near] = -grasp.stiffness[grasp.near] * grasp.gaps[grasp.near]
+    if grasp.gaps is not None:
+        apart = grasp.gaps > 0
+        preload[apart] = -grasp.stiffness[apart] * grasp.gaps[apart]
     return preload
 
 
@@ -384,7 +393,7 @@ def _settled_grasp(spec: MapSpec) -> tuple[Any, np.ndarray, np.ndarray]:
     if loaded.ratchet is not None:
         loaded.ratchet.release()
     grasp = grasp_from_mujoco(model, data, spec.object_body, compliance=spec.compliance,
-                              near=float(spec.near))  # fmt: skip
+                              near=float(spec.near), contact_law=spec.contact_law)  # fmt: skip
     commands = loaded.commands
     if hasattr(grasp, "full_commands"):  # one per actuator -> one per column of R
         commands = grasp.full_commands(commands)

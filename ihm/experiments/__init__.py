@@ -29,8 +29,10 @@ from ..sim_maps import ramp_limit
 #: how every experiment reads a grasp with MuJoCo's stiffness
 #: (:func:`ihm.grasp_from_mujoco`): the hand's points within the ramp's 2 mm of the object
 #: that do not touch it yet become contacts at their gap (:mod:`ihm.near`), every contact
-#: the motion the ramp allows can close
-MUJOCO_READ: dict[str, Any] = {"compliance": "mujoco", "near": ramp_limit()[0]}
+#: the motion the ramp allows can close, and each contact follows MuJoCo's static law as
+#: a convex piecewise-linear spring (:mod:`ihm.contact_law`)
+MUJOCO_READ: dict[str, Any] = {"compliance": "mujoco", "near": ramp_limit()[0],
+                               "contact_law": "fitted"}  # fmt: skip
 
 #: experiment name -> "module:function"; the function takes (out, quick, workers) and
 #: returns a JSON-serialisable summary.

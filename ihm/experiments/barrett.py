@@ -68,7 +68,8 @@ def _maps(
         else:
             opts = dict(opts)
             model_spec = replace(spec, compliance=opts.pop("compliance", "unit"),
-                                 near=opts.pop("near", 0.0))  # fmt: skip
+                                 near=opts.pop("near", 0.0),
+                                 contact_law=opts.pop("contact_law", "slope"))  # fmt: skip
             rm = analysis_map(model_spec, method=method, workers=workers, progress=False, **opts)
         walls[label] = time.perf_counter() - t
         out.append((label, rm))
