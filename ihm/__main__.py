@@ -207,6 +207,11 @@ def _add_map(sub: Any) -> None:
                      help="with --compliance mujoco: hand points within D [m] of the object that "
                      "do not touch it yet become contacts at their gap (ihm.near; default 0, "
                      "none; the experiments use 0.002)")  # fmt: skip
+    mp_.add_argument("--contact-law", choices=("slope", "fitted"), default="slope",
+                     help="with --compliance mujoco: each contact a linear spring of its slope "
+                     "at the state (slope, default) or MuJoCo's static law, which stiffens as "
+                     "the contact presses, as a convex piecewise-linear spring (fitted, "
+                     "ihm.contact_law; the experiments use it)")  # fmt: skip
     mp_.add_argument("--cap", type=float, default=10.0, help="largest force tried [N] (10)")
     mp_.add_argument("--workers", type=int, default=1, help="processes (default 1); with "
                      "--ray, the CPUs of a new local Ray cluster")  # fmt: skip
@@ -339,7 +344,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
         spec = MapSpec(args.scene, args.plane, args.directions, seat=args.seat,
                        nonbackdrivable=args.nonbackdrivable, frame=args.frame,
                        cap=args.cap, object_body=args.object_body, compliance=args.compliance,
-                       near=args.near,
+                       near=args.near, contact_law=args.contact_law,
                        motion_limit=None if args.motion_limit is None
                        else tuple(args.motion_limit))  # fmt: skip
         for method in args.method:

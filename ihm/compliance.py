@@ -90,6 +90,7 @@ from stability import GraspError
 
 __all__ = [
     "actuator_stiffness",
+    "contact_depth",
     "contact_rows",
     "contact_stiffness",
     "impedance",
@@ -97,7 +98,6 @@ __all__ = [
     "passive_stiffness",
     "probe_contact_stiffness",
     "row_stiffness",
-    "secant_stiffness",
     "static_normal_force",
     "tendon_limit_gaps",
 ]
@@ -152,22 +152,23 @@ def row_stiffness(
     return out
 
 
+def contact_depth(data: mujoco.MjData, i: int) -> float:
+    """How far MuJoCo contact ``i`` presses into its margin, ``max(0, includemargin - dist)``
+    [m] (``-r`` of its rows, module docstring)."""
+    con = data.contact[i]
+    return max(0.0, float(con.includemargin - con.dist))
+
+
 def contact_stiffness(
-    model: mujoco.MjModel, data: mujoco.MjData, contact_ids: Iterable[int], span: float = 0.0
+    model: mujoco.MjModel, data: mujoco.MjData, contact_ids: Iterable[int]
 ) -> NDArray[np.float64]:
     """Normal stiffness ``K = -d c_n / d r`` [N/m] of each MuJoCo contact's soft constraint at
     the state (module docstring): the sum of :func:`row_stiffness` over its rows with
     ``k > 0`` (frictionless, pyramidal edges, the elliptic normal). ``data`` after
-    ``mj_forward``; any ``condim`` and cone. ``span > 0`` [m]: instead the secant of the
-    static law over ``span`` more penetration, ``(f_n(r - span) - f_n(r)) / span``
-    (:func:`secant_stiffness`)."""
+    ``mj_forward``; any ``condim`` and cone."""
     out = []
     for i in contact_ids:
         rows = [j for j in contact_rows(data, int(i)) if data.efc_KBIP[j, 0] > 0]
-        if span > 0:
-            solimp = np.asarray(data.contact[int(i)].solimp, dtype=float)
-            out.append(secant_stiffness(data, rows, solimp, span))
-            continue
         solimp0 = float(data.contact[int(i)].solimp[0])
         out.append(float(row_stiffness(data, rows, engage_imp=solimp0).sum()))
     return np.array(out, dtype=float)
@@ -192,28 +193,6 @@ def impedance(solimp: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np
                          1.0 - (1.0 - x) ** power / (1.0 - mid) ** (power - 1))  # fmt: skip
         imp = d0 + y * (dw - d0)
     return np.clip(imp, mujoco.mjMINIMP, mujoco.mjMAXIMP)
-
-
-def secant_stiffness(
-    data: mujoco.MjData, rows: Iterable[int], solimp: NDArray[np.float64], span: float
-) -> float:
-    """The secant ``(f_n(r - span) - f_n(r)) / span`` [N/m] of the static law ``f_j(r) = -k_j
-    imp(r)^2 r / ((1 - imp(r)) c_j)`` (module docstring; ``c_j = R_j imp_j / (1 - imp_j)``
-    read off the row, ``imp`` from :func:`impedance`) summed over the contact's ``rows``:
-    the linear spring through MuJoCo's force at the state and ``span`` deeper. MuJoCo's
-    impedance grows with penetration over ``solimp``'s width, so this exceeds the slope
-    there."""
-    idx = np.fromiter(rows, dtype=np.int64)
-    kbip = np.asarray(data.efc_KBIP)[idx]
-    k, imp_now = kbip[:, 0], kbip[:, 2]
-    c = np.asarray(data.efc_R)[idx] * imp_now / (1.0 - imp_now)
-    r0 = np.minimum(np.asarray(data.efc_pos)[idx] - np.asarray(data.efc_margin)[idx], 0.0)
-
-    def force(r: NDArray[np.float64]) -> NDArray[np.float64]:
-        imp = impedance(solimp, r)
-        return -k * imp**2 * r / ((1.0 - imp) * c)
-
-    return float(np.sum(force(r0 - span) - force(r0)) / span)
 
 
 def static_normal_force(

@@ -83,7 +83,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from stability import Grasp, GraspError
 
-from .compliance import contact_stiffness
+from .compliance import contact_depth, contact_stiffness
+from .contact_law import LAW_SPAN, law_pieces
 from .handmodel import (
     NEAR_LIMIT,
     HandElement,
@@ -94,7 +95,6 @@ from .handmodel import (
     transmission,
 )
 from .near import near_contacts, widened
-from .contact_law import LAW_SPAN, law_pieces
 from .patches import ContactGroup, merge_contacts, reduce_patches
 
 __all__ = [
@@ -407,11 +407,10 @@ def _read(
     data: mujoco.MjData,
     in_obj: NDArray[np.bool_],
     stiffness: bool,
-    span: float = 0.0,
 ) -> list[ContactGroup]:
     """One :class:`ContactGroup` per active object contact (:func:`object_contact_ids`), with
-    its normal stiffness (:func:`ihm.compliance.contact_stiffness`, the secant over ``span``
-    when ``span > 0``) if ``stiffness``;
+    its normal stiffness (:func:`ihm.compliance.contact_stiffness`) and static law
+    (``ContactGroup.law``) if ``stiffness``;
     :class:`GraspError` for a contact with torsional or rolling friction."""
     out = []
     for i, hand_geom, obj_first in object_contact_ids(data, in_obj[model.geom_bodyid].tolist()):
@@ -426,17 +425,11 @@ def _read(
         obj_geom = con.geom1 if obj_first else con.geom2
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
-        k = float(contact_stiffness(model, data, [i], span)[0]) if stiffness else 0.0
-        law = (*(float(v) for v in con.solimp[:5]), _depth(data, i)) if stiffness else ()
+        k = float(contact_stiffness(model, data, [i])[0]) if stiffness else 0.0
+        law = (*(float(v) for v in con.solimp[:5]), contact_depth(data, i)) if stiffness else ()
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
                                 frame, frame.T @ force, mu, [i], k, law))  # fmt: skip
     return out
-
-
-def _depth(data: mujoco.MjData, i: int) -> float:
-    """How far MuJoCo contact ``i`` presses into its margin [m] (0 when it does not)."""
-    j = int(data.contact[i].efc_address)
-    return max(0.0, float(data.efc_margin[j] - data.efc_pos[j]))
 
 
 def grasp_from_mujoco(
@@ -451,7 +444,6 @@ def grasp_from_mujoco(
     hand_rtol: float = 0.02,
     compliance: str = "unit",
     near: float = 0.0,
-    contact_span: float = 0.0,
     contact_law: str = "slope",
 ) -> SceneGrasp:
     """Read the grasp of ``object_body`` off a MuJoCo state (after ``mj_forward``).
@@ -481,10 +473,12 @@ def grasp_from_mujoco(
     ``near`` of the object that do not touch it yet (MuJoCo's collision with ``near`` more
     margin) become contacts too, with force 0, MuJoCo's stiffness as they engage and their
     gap in ``grasp.gaps`` (:mod:`ihm.near`); they come after the touching contacts.
-    ``contact_span`` [m] (``compliance="mujoco"`` only; default 0): a touching contact's
-    stiffness is the secant of MuJoCo's static law over ``contact_span`` more penetration
-    (:func:`ihm.compliance.secant_stiffness`: MuJoCo's contacts stiffen as they press)
-    instead of its slope at the state.
+    ``contact_law`` (``compliance="mujoco"`` only): ``"slope"`` (default) makes each contact
+    a linear spring of its slope at the state; ``"fitted"`` follows MuJoCo's static law,
+    which stiffens as a contact presses, as a convex piecewise-linear spring over
+    :data:`ihm.contact_law.LAW_SPAN` past the state (:mod:`ihm.contact_law`): each contact
+    keeps the law's first slope, and each further slope step is a co-located contact
+    (``grasp.piece_of``) with no force and a gap in ``grasp.gaps``, after all the others.
 
     Raises
     ------
@@ -508,17 +502,12 @@ def grasp_from_mujoco(
         raise GraspError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
     if not (isinstance(near, (int, float)) and np.isfinite(near) and near >= 0):
         raise GraspError(f"near must be a finite number >= 0 [m], got {near!r}")
-    if not (isinstance(contact_span, (int, float)) and np.isfinite(contact_span)
-            and contact_span >= 0):  # fmt: skip
-        raise GraspError(f"contact_span must be a finite number >= 0 [m], got {contact_span!r}")
     if contact_law not in ("slope", "fitted"):
         raise GraspError(f"contact_law must be 'slope' or 'fitted', got {contact_law!r}")
-    if contact_law == "fitted" and (compliance != "mujoco" or contact_span > 0):
-        raise GraspError("contact_law='fitted' needs compliance='mujoco' and no contact_span: "
-                         "it fits MuJoCo's own law from the slope at the state")  # fmt: skip
-    if (near > 0 or contact_span > 0) and compliance != "mujoco":
-        raise GraspError("near contacts and contact_span need compliance='mujoco': a length "
-                         "in metres has no meaning for the thesis' unit springs")  # fmt: skip
+    if (near > 0 or contact_law != "slope") and compliance != "mujoco":
+        raise GraspError("near contacts and contact_law='fitted' need compliance='mujoco': "
+                         "they are MuJoCo's lengths and law, which the thesis' unit springs "
+                         "do not have")  # fmt: skip
     mj = compliance == "mujoco"
     obj = _body_id(model, object_body)
     in_obj = body_subtree(model, obj)
@@ -526,7 +515,7 @@ def grasp_from_mujoco(
     x_o = data.xpos[obj].copy()
     R_o = data.xmat[obj].reshape(3, 3).copy()
 
-    groups = merge_contacts(_read(model, data, in_obj, mj, float(contact_span)), merge_tol)
+    groups = merge_contacts(_read(model, data, in_obj, mj), merge_tol)
     if not groups:
         raise GraspError(
             f"no active contact between body {object_body!r} and the hand "

@@ -18,6 +18,8 @@ the first one's gap kept).
   the object, ``friction[0]`` as MuJoCo mixes it for the pair; 0 for ``condim`` 1;
   ``condim > 3`` refused);
 * force 0; the hand Jacobian as a touching contact of that body;
+* law (``compliance="mujoco"``): MuJoCo's static law from first touch (``ContactGroup.law``
+  with depth 0, :mod:`ihm.contact_law`);
 * stiffness (``compliance="mujoco"``): the slope at which the contact engages,
   ``K = sum_j k_j imp0 / R_j(imp0)`` over its rows with ``k_j > 0``, ``R_j(imp) = c_j (1 -
   imp) / imp`` with ``c_j = R_j imp_j / (1 - imp_j)`` read off the copy's rows and ``imp0 =
@@ -87,7 +89,8 @@ def near_contacts(read: list[ContactGroup], data: mujoco.MjData, near: float, st
         if not 0.0 < gap < near:
             continue
         k = engage_stiffness(data, i) if stiffness else 0.0
-        h = replace(g, force_world=np.zeros(3), ids=[], stiffness=k)
+        law = (*(float(v) for v in con.solimp[:5]), 0.0) if stiffness else ()
+        h = replace(g, force_world=np.zeros(3), ids=[], stiffness=k, law=law)
         found.append(h)
         gap_of[id(h)] = gap
     groups = merge_contacts(found, merge_tol)

@@ -293,7 +293,7 @@ class NodeLP:
         h.run()
         self.lp_time += time.perf_counter() - t0
         self.lp_count += 1
-        self.iterations += int(h.getInfoValue("simplex_iteration_count")[1])
+        self.iterations += _iterations(h)
         status = h.getModelStatus()
         if status == OPTIMAL:
             sol = h.getSolution()
@@ -357,3 +357,11 @@ class NodeLP:
             if math.isfinite(lo_r) and hi_x < lo_r - err:
                 return True
         return False
+
+
+def _iterations(h: highspy.Highs) -> int:
+    """The simplex iterations of ``h``'s last run; 0 where HiGHS marks its info invalid (it
+    then holds whatever the run left there, and summing it overflows the count)."""
+    status, value = h.getInfoValue("simplex_iteration_count")
+    ok = status == highspy.HighsStatus.kOk and bool(h.getInfo().valid)
+    return int(value) if ok and 0 <= int(value) < 2**31 else 0

@@ -145,6 +145,16 @@ def test_map_with_mujocos_stiffness_and_a_motion_limit(gripper: Path, tmp_path: 
     _one_error_line(capsys, "needs compliance 'mujoco'")
     assert main([*base[:-2], "--near", "0.001"]) == 2
     _one_error_line(capsys, "needs compliance 'mujoco'")
+    assert main([*base[:-2], "--contact-law", "fitted"]) == 2
+    _one_error_line(capsys, "needs compliance 'mujoco'")
+    rc = main([*base, "--method", "modesearch", "--contact-law", "fitted",
+               "--out", str(tmp_path / "c")])  # fmt: skip
+    assert rc == 0, capsys.readouterr().err
+    law = _map_csv(tmp_path / "c" / "gripper_xz.csv")
+    for push in (0.0, 180.0):  # stiffer contacts: still the cap within 2 mm
+        assert law[push] == (pytest.approx(10.0), True)
+    for angle in (90.0, 270.0):  # friction, held with micrometres of motion: 4e-6 apart
+        assert law[angle][0] == pytest.approx(free[angle][0], rel=1e-4)
 
 
 def test_sim_map_of_a_relative_path_on_workers(gripper: Path, monkeypatch) -> None:
