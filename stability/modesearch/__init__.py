@@ -64,7 +64,9 @@ Status semantics are ``refinement``'s: ``"solved"`` only with an exact point tha
 point's value and the other a proven bound; ``stats["certified"]`` when they meet within
 ``gap`` relative or ``abs_gap`` times the force scale absolute; a time-out returns the
 bracket reached. ``Existence`` is "stable" only with an exact point and "unstable" only
-when the tree is exhausted.
+when the tree is exhausted. A ``MaxDisturbance`` answer is ``stats["capped"]`` when its
+exact point reaches the cap, or when the bracket is certified and its proven bound is the
+cap (the point then lies within ``gap`` of it).
 """
 
 from __future__ import annotations
@@ -234,6 +236,8 @@ def _solve_once(grasp: Grasp, query: Any, opts: ModeSearchOptions,
     value = best[1]
     certified = upper is not None and upper - value <= max(opts.gap * abs(upper), search.abs_tol)
     sol = _answer(grasp, query, stats, ex, best[0], qvar, data, conditions, certified)
+    if data.direction is not None and certified and upper >= data.cap * (1 - 1e-8):
+        sol.stats["capped"] = True  # the proven bound is the cap, the point within the gap
     if outcome != "done":
         sol.status, sol.stable = outcome if outcome == "timeout" else "not_converged", None
         sol.stats["message"] = _message(outcome, opts)

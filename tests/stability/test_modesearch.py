@@ -81,6 +81,24 @@ def test_pinch_analytic_limit() -> None:
     assert sol.upper == pytest.approx(examples.PINCH_MAX_Z, rel=1e-4)
 
 
+@pytest.mark.parametrize("gap", [1e-4, 0.05])
+def test_capped_within_the_gap_and_not_below_it(gap: float) -> None:
+    """The pinch's limit just above the cap: capped, the exact point within ``gap`` of the
+    cap; the cap just above the limit: not capped, the limit itself."""
+    g = examples.pinch()
+    below = MaxDisturbance([0, 0, 1, 0, 0, 0], commands=examples.PINCH_TORQUE,
+                           cap=examples.PINCH_MAX_Z * (1 - 1e-3))  # fmt: skip
+    sol = solve(g, below, method="modesearch", gap=gap)
+    _exact(sol)
+    assert sol.stats["capped"] and sol.value >= below.cap * (1 - gap) - 1e-9
+    above = MaxDisturbance([0, 0, 1, 0, 0, 0], commands=examples.PINCH_TORQUE,
+                           cap=examples.PINCH_MAX_Z * (1 + 1e-3))  # fmt: skip
+    sol = solve(g, above, method="modesearch", gap=gap)
+    _exact(sol)
+    assert not sol.stats["capped"] and sol.value <= above.cap * (1 - 5e-4)
+    assert sol.upper >= examples.PINCH_MAX_Z * (1 - 1e-6)
+
+
 # ------------------------------------------------------------------ brute force, 2 contacts
 
 
