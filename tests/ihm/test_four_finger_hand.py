@@ -195,8 +195,10 @@ def test_scene_file(name):
 
 
 def test_scene_settles_fast(scene):
+    """Within 3 s of simulated time (the wall time is a benchmark's, not a test's: it
+    doubled on a shared machine)."""
     _, model, data, _, info = scene
-    assert info.time_s < 3.0 and info.wall_s < 1.0
+    assert info.time_s < 3.0 and info.steps < 3000
     assert np.abs(data.qvel).max() < 1e-3
     lo, hi = ff.JOINT_RANGES.T
     q = data.qpos[: ff.NQ]

@@ -202,13 +202,16 @@ def test_presolve_infeasibility_is_rechecked() -> None:
     refinement finds 0.141744, but SCIP's presolved model of the MaxDisturbance with cap 10
     was "infeasible" in 0.07 s (1 node): the answer was "unstable" for every s. Rechecked
     without presolve it is 0.141744 after about 40 s; here only that the wrong "unstable"
-    is gone within 5 s (a time-out with SCIP's incumbent at the answer)."""
+    is gone within 5 s (a time-out, with SCIP's incumbent at the answer when it has one: on
+    a loaded machine it may have none yet)."""
     g, f, d = SEED51
     assert solve(g, Existence(0.1 * np.asarray(d), commands=f), method="exact").stable
     sol = solve(g, MaxDisturbance(d, commands=f, cap=10.0), method="exact", time_limit=5.0)
     assert sol.stable is not False
     if sol.status == "timeout":
-        assert sol.stats["incumbent"] == pytest.approx(0.141744, rel=1e-4)
+        inc = sol.stats["incumbent"]
+        assert inc is None or inc == pytest.approx(0.141744, rel=1e-4)
+        assert sol.upper is None or sol.upper >= 0.141744 * (1 - 1e-4)
     else:
         assert sol.status == "solved" and sol.value == pytest.approx(0.141744, rel=1e-4)
 
