@@ -16,12 +16,13 @@ K d_n)`` (``d_n`` the separation, ``p`` the preload). A sum of such springs at o
 is a law whose slope rises by ``K_i`` after ``g_i`` more penetration: a convex law, which
 the methods already take (each term is a contact with the gap ``g_i``, preload ``-K_i
 g_i``). :func:`fit_law` finds the convex law closest to ``s`` over ``span`` more
-penetration from the state, in the largest relative error ``max |h - s| / s`` (a linear
-program over knots every ``spacing``), exact at the state. MuJoCo's law is convex up to
-0.77 mm, concave to the width and linear beyond, so no convex law follows it exactly: over
-3 mm from the state the fit is within 8.4-8.6 % from a depth of 0 to 0.3 mm and within
-10.4 % from any depth (``LawFit.error``, with this ``solimp``), where the slope at the state
-alone is off by up to 2x.
+penetration from the state, in the largest relative error ``max |h - s| / s``, exact at
+the state, with at most :data:`LAW_PIECES` knots (a linear program per choice of knots on a
+grid every :data:`LAW_SPACING`). MuJoCo's law is convex up to 0.77 mm, concave to the width
+and linear beyond, so no convex law follows it exactly: over 3 mm from the state the
+one-knot fit is within 8.5-10.3 % from a depth of 0 to 0.3 mm and within 10.4 % from any
+depth (``LawFit.error``, with this ``solimp``), where the slope at the state alone is off by
+41-55 % (it gives half the force 2 mm deeper).
 
 :func:`law_pieces` turns each contact of a grasp read off MuJoCo into its base spring and
 its pieces, co-located contacts with their gaps (:func:`ihm.grasp_from_mujoco` with
