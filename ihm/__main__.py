@@ -45,6 +45,7 @@ from stability import GraspError  # noqa: E402
 from stability.cli import ArgumentParser
 
 from . import scenes  # noqa: E402
+from .contact_law import CONTACT_LAWS  # noqa: E402
 from .contacts import SceneGrasp, grasp_from_mujoco  # noqa: E402
 
 PROG = "python -m ihm"
@@ -207,7 +208,7 @@ def _add_map(sub: Any) -> None:
                      help="with --compliance mujoco: hand points within D [m] of the object that "
                      "do not touch it yet become contacts at their gap (ihm.near; default 0, "
                      "none; the experiments use 0.002)")  # fmt: skip
-    mp_.add_argument("--contact-law", choices=("slope", "fitted"), default="slope",
+    mp_.add_argument("--contact-law", choices=CONTACT_LAWS, default="slope",
                      help="with --compliance mujoco: each contact a linear spring of its slope "
                      "at the state (slope, default) or MuJoCo's static law, which stiffens as "
                      "the contact presses, as a convex piecewise-linear spring (fitted, "

@@ -31,6 +31,7 @@ its pieces, co-located contacts with their gaps (:func:`ihm.grasp_from_mujoco` w
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -40,8 +41,20 @@ from numpy.typing import NDArray
 from .compliance import impedance
 from .patches import ContactGroup
 
-__all__ = ["LAW_PIECES", "LAW_SPACING", "LAW_SPAN", "LawFit", "fit_law", "law_pieces", "law_shape"]
+__all__ = [
+    "CONTACT_LAWS",
+    "LAW_PIECES",
+    "LAW_SPACING",
+    "LAW_SPAN",
+    "LawFit",
+    "fit_law",
+    "law_pieces",
+    "law_shape",
+]
 
+#: the contact laws :func:`ihm.grasp_from_mujoco` reads with ``compliance="mujoco"``: the
+#: linear spring of the slope at the state, or the fitted law of this module
+CONTACT_LAWS = ("slope", "fitted")
 #: how far past the state :func:`ihm.grasp_from_mujoco` fits the law [m]: the ramp's 2 mm at
 #: the centre of mass, and its 0.05 rad at a contact 20 mm away
 LAW_SPAN = 3e-3
@@ -80,8 +93,6 @@ def fit_law(solimp: tuple[float, ...], depth: float, span: float, pieces: int = 
     ``depth``, with at most ``pieces`` knots from a grid every ``spacing`` [m] inside the
     span: for each choice of knots a linear program (HiGHS) in the first slope, the slope
     steps ``>= 0`` and the error bound, on 401 points; the best choice is kept."""
-    import itertools
-
     si = np.asarray(solimp[:5], dtype=float)
     r = depth + np.linspace(0.0, span, 401)
     s = law_shape(si, r)
@@ -128,7 +139,7 @@ def _cached_fit(solimp: tuple[float, ...], depth: float, span: float) -> LawFit:
 
 def law_pieces(groups: list[ContactGroup], gaps: NDArray[np.float64], span: float,
                ) -> tuple[list[ContactGroup], NDArray[np.float64], NDArray[np.int64]]:  # fmt: skip
-    """Each contact with a law (``ContactGroup.law``: ``solimp`` and its depth [m]) as its
+    """Each contact with a law (``ContactGroup.law``, :class:`ihm.patches.ContactLaw`) as its
     fitted law (:func:`fit_law` over ``span``): the contact with the first slope as its
     stiffness, then, after all contacts, one co-located contact per knot with the slope's
     step as its stiffness, no force, and the contact's gap plus the knot as its gap.
@@ -136,10 +147,10 @@ def law_pieces(groups: list[ContactGroup], gaps: NDArray[np.float64], span: floa
     a piece of (its own index for the contacts read)."""
     base, pieces, piece_gaps, owner = [], [], [], []
     for k, (g, gap) in enumerate(zip(groups, gaps, strict=True)):
-        if not g.law:
+        if g.law is None:
             base.append(g)
             continue
-        fit = _cached_fit(tuple(g.law[:5]), float(g.law[5]), float(span))
+        fit = _cached_fit(g.law.solimp, g.law.depth, float(span))
         base.append(replace(g, stiffness=g.stiffness * fit.slope))
         for knot, step in zip(fit.knots, fit.steps, strict=True):
             pieces.append(replace(g, force_world=np.zeros(3), ids=[],

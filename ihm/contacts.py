@@ -84,7 +84,7 @@ from numpy.typing import ArrayLike, NDArray
 from stability import Grasp, GraspError
 
 from .compliance import contact_depth, contact_stiffness
-from .contact_law import LAW_SPAN, law_pieces
+from .contact_law import CONTACT_LAWS, LAW_SPAN, law_pieces
 from .handmodel import (
     NEAR_LIMIT,
     HandElement,
@@ -95,7 +95,7 @@ from .handmodel import (
     transmission,
 )
 from .near import near_contacts, widened
-from .patches import ContactGroup, merge_contacts, reduce_patches
+from .patches import ContactGroup, ContactLaw, merge_contacts, reduce_patches
 
 __all__ = [
     "HandModelError",
@@ -426,7 +426,7 @@ def _read(
         bodies = (int(model.geom_bodyid[hand_geom]), int(model.geom_bodyid[obj_geom]))
         mu = 0.0 if con.dim == 1 else float(con.friction[0])
         k = float(contact_stiffness(model, data, [i])[0]) if stiffness else 0.0
-        law = (*(float(v) for v in con.solimp[:5]), contact_depth(data, i)) if stiffness else ()
+        law = ContactLaw.of(con, contact_depth(data, i)) if stiffness else None
         out.append(ContactGroup((int(hand_geom), int(obj_geom)), bodies, [con.pos.copy()],
                                 frame, frame.T @ force, mu, [i], k, law))  # fmt: skip
     return out
@@ -502,8 +502,10 @@ def grasp_from_mujoco(
         raise GraspError(f"compliance must be 'unit' or 'mujoco', got {compliance!r}")
     if not (isinstance(near, (int, float)) and np.isfinite(near) and near >= 0):
         raise GraspError(f"near must be a finite number >= 0 [m], got {near!r}")
-    if contact_law not in ("slope", "fitted"):
-        raise GraspError(f"contact_law must be 'slope' or 'fitted', got {contact_law!r}")
+    if contact_law not in CONTACT_LAWS:
+        raise GraspError(
+            f"contact_law must be {' or '.join(map(repr, CONTACT_LAWS))}, got {contact_law!r}"
+        )
     if (near > 0 or contact_law != "slope") and compliance != "mujoco":
         raise GraspError("near contacts and contact_law='fitted' need compliance='mujoco': "
                          "they are MuJoCo's lengths and law, which the thesis' unit springs "

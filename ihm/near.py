@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .compliance import contact_rows
-from .patches import ContactGroup, merge_contacts
+from .patches import ContactGroup, ContactLaw, merge_contacts
 
 __all__ = ["engage_stiffness", "near_contacts", "widened"]
 
@@ -89,7 +89,7 @@ def near_contacts(read: list[ContactGroup], data: mujoco.MjData, near: float, st
         if not 0.0 < gap < near:
             continue
         k = engage_stiffness(data, i) if stiffness else 0.0
-        law = (*(float(v) for v in con.solimp[:5]), 0.0) if stiffness else ()
+        law = ContactLaw.of(con, 0.0) if stiffness else None
         h = replace(g, force_world=np.zeros(3), ids=[], stiffness=k, law=law)
         found.append(h)
         gap_of[id(h)] = gap

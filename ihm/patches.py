@@ -22,11 +22,26 @@ the ends.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["THIN_PATCH_M", "ContactGroup", "merge_contacts", "reduce_patches"]
+__all__ = ["THIN_PATCH_M", "ContactGroup", "ContactLaw", "merge_contacts", "reduce_patches"]
+
+
+class ContactLaw(NamedTuple):
+    """MuJoCo's static law of one contact (:mod:`ihm.contact_law`): its ``solimp`` (5
+    numbers) and how far it presses into its margin [m] at the state (0 for a contact not
+    touching yet)."""
+
+    solimp: tuple[float, ...]
+    depth: float
+
+    @classmethod
+    def of(cls, con: Any, depth: float) -> ContactLaw:
+        """The law of MuJoCo contact ``con`` (an ``MjContact``) at ``depth`` [m]."""
+        return cls(tuple(float(v) for v in con.solimp[:5]), float(depth))
 
 
 @dataclass
@@ -37,9 +52,8 @@ class ContactGroup:
     ``n`` into the object; ``force_world``: the summed force of the hand on the object
     [N]; ``mu``: the smallest friction coefficient; ``ids``: the MuJoCo contact indices;
     ``stiffness``: the normal stiffness of the springs it stands for [N/m] (module
-    docstring; 0 where not computed); ``law``: MuJoCo's static law of the first contact,
-    its ``solimp`` (5 numbers) and its depth into the margin [m] (:mod:`ihm.contact_law`;
-    empty where not read)."""
+    docstring; 0 where not computed); ``law``: MuJoCo's static law of the first contact
+    (:class:`ContactLaw`; None where not read)."""
 
     pair: tuple[int, int]
     bodies: tuple[int, int]
@@ -49,7 +63,7 @@ class ContactGroup:
     mu: float
     ids: list[int]
     stiffness: float = 0.0
-    law: tuple[float, ...] = ()
+    law: ContactLaw | None = None
 
 
 def merge_contacts(contacts: list[ContactGroup], merge_tol: float) -> list[ContactGroup]:

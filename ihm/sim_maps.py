@@ -37,6 +37,7 @@ from stability.io import write_csv
 from stability.maps import ResistibleMap, plane_axes, plot_resistible, radial_top
 
 from . import scenes
+from .contact_law import CONTACT_LAWS
 from .resistance import ResistanceOptions, simulated_resistance
 
 __all__ = [
@@ -126,8 +127,11 @@ class MapSpec:
             raise MapError(f"near must be a finite number >= 0 [m], got {self.near!r}")
         if self.near > 0 and self.compliance != "mujoco":
             raise MapError("near is a distance in metres: it needs compliance 'mujoco'")
-        if self.contact_law not in ("slope", "fitted"):
-            raise MapError(f"contact_law must be 'slope' or 'fitted', got {self.contact_law!r}")
+        if self.contact_law not in CONTACT_LAWS:
+            raise MapError(
+                f"contact_law must be {' or '.join(map(repr, CONTACT_LAWS))}, "
+                f"got {self.contact_law!r}"
+            )
         if self.contact_law == "fitted" and self.compliance != "mujoco":
             raise MapError("contact_law 'fitted' is MuJoCo's law: it needs compliance 'mujoco'")
 
@@ -333,8 +337,9 @@ def scene_disturbance(
 def scene_preload(grasp: Any) -> np.ndarray | None:
     """The contacts' preloads [N] every query of a settled scene's grasp starts from
     (:func:`scene_disturbance`): None with the thesis' unit springs (unloaded); with
-    MuJoCo's stiffness (``grasp.compliant``) the settled normal forces, and ``-k g`` at its
-    near contacts (``grasp.near``, ``grasp.gaps``)."""
+    MuJoCo's stiffness (``grasp.compliant``) the settled normal forces, and ``-k g`` at each
+    contact with a gap ``g > 0`` (``grasp.gaps``: its near contacts and the fitted law's
+    steps, :mod:`ihm.contact_law`)."""
     if not grasp.compliant:
         return None
     preload = grasp.forces[:, 0].copy()

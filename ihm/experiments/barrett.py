@@ -67,9 +67,8 @@ def _maps(
             rm = simulated_map(spec, workers=workers, progress=False)
         else:
             opts = dict(opts)
-            model_spec = replace(spec, compliance=opts.pop("compliance", "unit"),
-                                 near=opts.pop("near", 0.0),
-                                 contact_law=opts.pop("contact_law", "slope"))  # fmt: skip
+            read = {k: opts.pop(k) for k in ("compliance", "near", "contact_law") if k in opts}
+            model_spec = replace(spec, **read)
             rm = analysis_map(model_spec, method=method, workers=workers, progress=False, **opts)
         walls[label] = time.perf_counter() - t
         out.append((label, rm))

@@ -360,8 +360,9 @@ class NodeLP:
 
 
 def _iterations(h: highspy.Highs) -> int:
-    """The simplex iterations of ``h``'s last run; 0 where HiGHS marks its info invalid (it
-    then holds whatever the run left there, and summing it overflows the count)."""
+    """The simplex iterations of ``h``'s last run; 0 where HiGHS marks its info invalid
+    (``getInfoValue`` then answers ``kWarning`` with whatever the run left there, and summing
+    it overflows the count)."""
     status, value = h.getInfoValue("simplex_iteration_count")
-    ok = status == highspy.HighsStatus.kOk and bool(h.getInfo().valid)
+    ok = status == highspy.HighsStatus.kOk
     return int(value) if ok and 0 <= int(value) < 2**31 else 0
