@@ -54,6 +54,9 @@ class Search:
         self.nodes = self.popped = self.polishes = self.quicks = 0
         self.polish_time = self.quick_time = 0.0
         self.first_exact_node: int | None = None
+        self.together = colocated(lp)  # per contact, the others at its point
+        k = np.asarray(lp.ex.grasp.stiffness, dtype=float)
+        self.closes_below = np.asarray(data.preload, dtype=float) / k  # closed iff d_n <= this
 
     # ------------------------------------------------------------ incumbent
 
@@ -261,7 +264,7 @@ class Search:
         narrower than ``min_width``."""
         normal, tan, act = node
         if kind == "n":
-            return [(normal[:i] + (s,) + normal[i + 1 :], tan, act) for s in ("C", "O")]
+            return [(self.tie_normal(normal, i, s), tan, act) for s in ("C", "O")]
         if kind == "a":
             return [(normal, tan, act[:i] + (s,) + act[i + 1 :]) for s in ("L", "M")]
         p, ex = self.lp.prob, self.ex
@@ -270,10 +273,16 @@ class Search:
         moving = np.linalg.norm(dt) > 1e-12
         pd = math.atan2(-dt[1], -dt[0]) if moving else pc
 
-        def rep(s: tuple[str, tuple[float, float] | None]) -> Node:
-            return (normal, tan[:i] + (s,) + tan[i + 1 :], act)
-
         kind_i, arc = tan[i]
+
+        def rep(s: tuple[str, tuple[float, float] | None]) -> Node:
+            # co-located contacts share d_t: one that slides slides with it (S: all stick)
+            tied = [] if kind_i == "S" else [j for j in self.together[i] if tan[j] == tan[i]]
+            new = list(tan)
+            for j in (i, *tied):
+                new[j] = s
+            return (normal, tuple(new), act)
+
         if kind_i == "U":
             if pc is None and pd is None:
                 a0 = 0.0
@@ -298,6 +307,18 @@ class Search:
         elif kind_i == "S" and oc is not None and oc <= w:
             w1 = min(max(oc, 0.1 * w), 0.9 * w)
         return [rep((kind_i, (a, w1))), rep((kind_i, ((a + w1) % TWO_PI, w - w1)))]
+
+    def tie_normal(self, normal: tuple[str, ...], i: int, s: str) -> tuple[str, ...]:
+        """``normal`` with contact ``i`` in state ``s`` and its undecided co-located contacts
+        in the state that implies: closed (``d_n <= p_i / k_i``), every one that closes at a
+        larger ``d_n`` is closed too; open, every one that closes at a smaller one is open."""
+        new = list(normal)
+        new[i] = s
+        t = self.closes_below
+        for j in self.together[i]:
+            if new[j] == "U" and (t[j] >= t[i] if s == "C" else t[j] <= t[i]):
+                new[j] = s
+        return tuple(new)
 
     # ------------------------------------------------------------ the search
 
@@ -465,3 +486,15 @@ class Search:
         if self.best is not None:
             vals.append(self.best[1])
         return max(vals) if vals else None
+
+
+def colocated(lp: NodeLP) -> list[tuple[int, ...]]:
+    """Per contact, the other contacts at the same point: the same columns of ``G``, the
+    same rows of ``J`` and the same ``mu`` (a piecewise-linear contact law's steps, or a
+    contact listed twice). Their normal and tangential motions ``d_n``, ``d_t`` are one."""
+    p, m = lp.prob, lp.m
+    Gt = p.G.T.reshape(m, 3, -1)
+    Jt = None if p.J is None else p.J.reshape(m, 3, -1)
+    keys = [(Gt[i].tobytes(), b"" if Jt is None else Jt[i].tobytes(), float(lp.mu[i]))
+            for i in range(m)]  # fmt: skip
+    return [tuple(j for j in range(m) if j != i and keys[j] == keys[i]) for i in range(m)]

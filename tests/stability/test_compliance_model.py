@@ -57,6 +57,43 @@ def test_pinch_with_unequal_stiffness_splits_as_statics_says(k, method):
     assert sol.forces[:, 0] == pytest.approx(P - np.asarray(k) * dn, abs=1e-7)
 
 
+def stepped_pinch_limit(k1: float, k2: float, ks: float, g: float) -> float:
+    """:func:`pinch_limit` with a third contact of stiffness ``ks`` at contact 2's point that
+    takes load once contact 2 has pressed ``g`` (preload ``-ks g``: a convex contact law
+    with one slope step). Beyond the step ``c_1 - c_2 - c_s + s cos(theta) = 0`` gives
+    ``x = (s cos(theta) + ks g) / K``, ``K = k_1 + k_2 + ks``, and contact 1 slides at
+    ``s sin(theta) = 2 mu (p - k_1 x)``: ``s = 2 mu (p - k_1 ks g / K) / (sin(theta) + 2 mu
+    cos(theta) k_1 / K)``."""
+    s = pinch_limit(k1, k2)
+    if s * math.cos(THETA) / (k1 + k2) <= g:
+        return s
+    K = k1 + k2 + ks
+    return 2 * MU * (P - k1 * ks * g / K) / (math.sin(THETA) + 2 * MU * math.cos(THETA) * k1 / K)
+
+
+@pytest.mark.parametrize("method", EXACT_METHODS)
+@pytest.mark.parametrize("case", ["split sliding contact", "step at a gap"])
+def test_contacts_at_one_point_act_as_one_contact_law(method, case):
+    """Two contacts at one point with one motion. Contact 1 (the one that unloads and
+    slides) split into springs of 1 and 2 N/m with the preload split alike is contact 1 of
+    3 N/m; a 2 N/m step at contact 2 that engages after 0.03 m is the convex law of
+    :func:`stepped_pinch_limit`."""
+    k1, k2 = 3.0, 1.0
+    if case == "split sliding contact":
+        pts, nrm = [[-A, 0, 0], [A, 0, 0], [-A, 0, 0]], [[1, 0, 0], [-1, 0, 0], [1, 0, 0]]
+        k, pre, want = [1.0, k2, 2.0], [P / 3, P, 2 * P / 3], pinch_limit(k1, k2)
+    else:
+        pts, nrm = [[-A, 0, 0], [A, 0, 0], [A, 0, 0]], [[1, 0, 0], [-1, 0, 0], [-1, 0, 0]]
+        k, pre, want = [k1, k2, 2.0], [P, P, -2.0 * 0.03], stepped_pinch_limit(k1, k2, 2.0, 0.03)
+        assert abs(want / pinch_limit(k1, k2) - 1.0) > 0.01  # the step engages
+    g = st.Grasp(pts, nrm, MU, stiffness=k)
+    d = np.array([math.cos(THETA), math.sin(THETA), 0, 0, 0, 0])
+    sol = st.solve(g, st.MaxDisturbance(d, preload=pre, cap=100.0), method=method)
+    assert sol.status == "solved" and sol.stable
+    assert sol.value == pytest.approx(want, rel=1e-6)
+    assert max(sol.residuals().values()) < 1e-7
+
+
 @pytest.mark.parametrize("k", [(3.0, 1.0), (1.0, 3.0)])
 def test_iterative_follows_the_stiffness_too(k):
     """The iterative scheme (no guarantee; its bisection stops at 1e-3) lands within 0.2 %
