@@ -28,6 +28,16 @@ the largest misalignment of friction against the slide (or friction outside the 
 and splits an arc between the friction's and the slide's angles; nodes are taken
 best-first, deeper first on ties.
 
+Contacts at one point (the same columns of ``G`` and rows of ``J``, the same ``mu``: a
+piecewise-linear contact law's steps) share ``d_n`` and ``d_t``, so a branch on one decides
+the others where that loses no exact point: closing contact ``i`` (``d_n <= p_i / k_i``)
+closes every one that closes at a larger ``d_n``, opening it opens every one that closes
+at a smaller one; a tangential split of an undecided contact gives the undecided ones at
+its point the same state (all stick, or all slide in the same half-circle: a closed one
+slides against ``-d_t``, an open one carries no friction), and halving a slide arc halves
+theirs in that arc. Points with ``d_t = 0`` and friction in different halves of a slide arc
+are left out of that arc's children, but every one lies in the sibling where all stick.
+
 Exact points come from polishing only (:func:`stability.model.slides.slide_search`, the
 certificate of ``refinement``): a node's modes and slide directions are fixed and the slide
 angles optimised by sequential LP; the point must pass the exact conditions. A leaf whose LP
