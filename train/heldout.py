@@ -143,8 +143,9 @@ def evaluate_heldout(
     """``episodes`` deterministic episodes from test grasps ``0 .. episodes - 1`` (at most
     ``test_grasps``, the size of the test set: :data:`TEST_GRASPS` = 100 or more; a larger set
     begins with the same 100 grasps) under ``physics`` (nominal: ``None``); :func:`summarize` of
-    them plus ``grasps`` (the test-grasp index of each episode, in the order they ended) and
-    ``dropped_grasps`` (the indices of those that dropped, sorted).
+    them plus ``grasps`` (the test-grasp index of each episode, in the order they ended),
+    ``dropped_grasps`` (the indices of those that dropped, sorted) and ``drop_seconds`` (when
+    each drop happened [s], sorted).
 
     ``act`` maps a batch of observations to a batch of actions; ``seed`` seeds the envs'
     sensor noise. ``physics`` may also give each episode its own: the episode from test grasp
@@ -194,12 +195,14 @@ def evaluate_heldout(
         reset_options=start,
         max_steps=steps,
     )
+    dt = float(envs[0].unwrapped.dt)
     for env in envs:
         env.close()
     res = {
         **summarize(eps),
         "grasps": [e["grasp"] for e in eps],
         "dropped_grasps": sorted(e["grasp"] for e in eps if e["dropped"]),
+        "drop_seconds": sorted(round(e["steps"] * dt, 2) for e in eps if e["dropped"]),
         "seconds": seconds,
     }
     if shield != "none":

@@ -46,6 +46,8 @@ def test_screened_start_grasps_are_the_ones_that_hold_still() -> None:
     assert scr["unheld_starts"] == len(skipped) > 0
     assert plain["drops"] == len(set(range(12)) - held) > 0
     assert plain["dropped_grasps"] == sorted(set(range(12)) - held)  # the two paths agree
+    assert len(plain["drop_seconds"]) == plain["drops"]
+    assert all(0.0 < t <= 2.0 for t in plain["drop_seconds"])
     assert scr["dropped_grasps"] == []
     assert "unheld_starts" not in plain
 
