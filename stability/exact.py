@@ -427,13 +427,21 @@ def _run(ex: CoulombModel, run: _Run, stats: dict[str, Any]) -> NDArray[np.float
     if res.status == "timeout":
         stats["incumbent"] = res.objective
         stats["incumbent_checked"] = False
+        x = None
         if res.x is not None:  # the incumbent's point, polished and checked like an optimum
+            check: dict[str, Any] = {}
             try:
-                x = _checked(ex, polish(ex, res.x, gap, {}), stats={})
-                stats["incumbent_checked"] = True
-                stats["box_reached"] = _box_reached(ex, x)
+                x = _checked(ex, polish(ex, res.x, gap, {}), stats=check)
             except Stop:
                 pass
+        # an exact point: the conditions of _checked and friction against each slide (the
+        # optimum's alignment is judged in _bracket); its value is the polished point's
+        if x is not None and check["violations"]["alignment"] <= ALIGN_RTOL * (
+            1.0 + ex.prob.bounds.force
+        ):
+            stats["incumbent"] = ex.prob.model.objective_value(x)
+            stats["incumbent_checked"] = True
+            stats["box_reached"] = _box_reached(ex, x)
         raise Stop("timeout", f"time_limit {opts.time_limit} s reached ({res.message}; "
                    f"incumbent {res.objective}, dual bound {res.bound})")  # fmt: skip
     if res.status == "optimal" and res.x is not None:

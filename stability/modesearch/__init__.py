@@ -28,8 +28,8 @@ the largest misalignment of friction against the slide (or friction outside the 
 and splits an arc between the friction's and the slide's angles; nodes are taken
 best-first, deeper first on ties.
 
-Contacts at one point (the same columns of ``G`` and rows of ``J``, the same ``mu``: a
-piecewise-linear contact law's steps) share ``d_n`` and ``d_t``, so a branch on one decides
+Contacts at one point (the same columns of ``G`` and rows of ``J``: a piecewise-linear
+contact law's steps) share ``d_n`` and ``d_t``, so a branch on one decides
 the others where that loses no exact point: closing contact ``i`` (``d_n <= p_i / k_i``)
 closes every one that closes at a larger ``d_n``, opening it opens every one that closes
 at a smaller one; a tangential split of an undecided contact gives the undecided ones at

@@ -8,6 +8,7 @@ import heapq
 import itertools
 import math
 import time
+from fractions import Fraction
 from typing import TYPE_CHECKING
 
 import highspy
@@ -55,8 +56,11 @@ class Search:
         self.polish_time = self.quick_time = 0.0
         self.first_exact_node: int | None = None
         self.together = colocated(lp)  # per contact, the others at its point
-        k = np.asarray(lp.ex.grasp.stiffness, dtype=float)
-        self.closes_below = np.asarray(data.preload, dtype=float) / k  # closed iff d_n <= this
+        # closed iff d_n <= p / k; compared exactly, so that round-off never ties two contacts
+        # whose thresholds differ
+        k = np.asarray(lp.ex.grasp.stiffness, dtype=float).tolist()
+        pre = np.asarray(data.preload, dtype=float).tolist()
+        self.closes_below = [Fraction(p) / Fraction(kk) for p, kk in zip(pre, k, strict=True)]
 
     # ------------------------------------------------------------ incumbent
 
@@ -276,7 +280,8 @@ class Search:
         kind_i, arc = tan[i]
 
         def rep(s: tuple[str, tuple[float, float] | None]) -> Node:
-            # co-located contacts share d_t: one that slides slides with it (S: all stick)
+            # co-located contacts share d_t, so those in i's state take its child's state
+            # (package docstring); a sticking contact's friction arc is its own: not tied
             tied = [] if kind_i == "S" else [j for j in self.together[i] if tan[j] == tan[i]]
             new = list(tan)
             for j in (i, *tied):
@@ -489,12 +494,11 @@ class Search:
 
 
 def colocated(lp: NodeLP) -> list[tuple[int, ...]]:
-    """Per contact, the other contacts at the same point: the same columns of ``G``, the
-    same rows of ``J`` and the same ``mu`` (a piecewise-linear contact law's steps, or a
-    contact listed twice). Their normal and tangential motions ``d_n``, ``d_t`` are one."""
+    """Per contact, the other contacts at the same point: the same columns of ``G`` and the
+    same rows of ``J`` (a piecewise-linear contact law's steps, or a contact listed twice).
+    Their normal and tangential motions ``d_n``, ``d_t`` are one, whatever their ``mu``."""
     p, m = lp.prob, lp.m
     Gt = p.G.T.reshape(m, 3, -1)
     Jt = None if p.J is None else p.J.reshape(m, 3, -1)
-    keys = [(Gt[i].tobytes(), b"" if Jt is None else Jt[i].tobytes(), float(lp.mu[i]))
-            for i in range(m)]  # fmt: skip
+    keys = [(Gt[i].tobytes(), b"" if Jt is None else Jt[i].tobytes()) for i in range(m)]
     return [tuple(j for j in range(m) if j != i and keys[j] == keys[i]) for i in range(m)]

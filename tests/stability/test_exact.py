@@ -333,3 +333,28 @@ def test_a_recheck_stopped_by_the_time_limit_leaves_the_answer_uncertified(
     assert sol.stats["recheck"]["stopped"] == "timeout"
     assert not sol.stats["certified"] and "unconfirmed" in sol.stats["message"]
     assert sol.stats["recheck"]["solves"][0]["status"] == "timeout"
+
+
+def test_a_time_outs_incumbent_is_the_value_of_its_checked_point(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A time-out keeps SCIP's incumbent on the feasible side only as the value of its
+    polished, checked point: here SCIP's optimum of the pinch reported as a time-out whose
+    objective is 1 % above its point's (SCIP's incumbent value and point can differ by its
+    tolerances). The bracket's lower side is the point's value, the pinch's limit."""
+    import dataclasses
+
+    import stability.exact as exact
+
+    real = exact._scip
+
+    def timed_out(ex, opts, time_limit, stats):
+        res = real(ex, opts, time_limit, stats)
+        return dataclasses.replace(res, status="timeout", objective=1.01 * res.objective)
+
+    monkeypatch.setattr(exact, "_scip", timed_out)
+    q = MaxDisturbance(Z, commands=examples.PINCH_TORQUE, cap=100.0)
+    sol = solve(examples.pinch(), q, method="exact")
+    assert sol.status == "timeout" and sol.stats["incumbent_checked"]
+    assert sol.lower == pytest.approx(examples.PINCH_MAX_Z, rel=1e-6)
+    assert sol.upper >= sol.lower

@@ -361,3 +361,66 @@ def test_existence_answered_by_the_first_stuck_point():
     assert sol.status == "solved" and sol.stable
     assert sol.stats["nodes"] == 0 and sol.stats["root_bound"] is None
     assert sol.max_residual() < 1e-9
+
+
+# ------------------------------------------------------------------ contacts at one point
+
+
+def _split(seed: int, step: bool) -> tuple[Grasp, np.ndarray, Grasp, np.ndarray, np.ndarray]:
+    """A random three-finger grasp with contact 0 split into two contacts at its point
+    (stiffness and preload shared 40/60: the same law) and, with ``step``, a contact at
+    contact 1's point that engages after a gap (preload ``-k g``); the grasp whole; a
+    random load direction."""
+    rng = np.random.default_rng(seed)
+    g = examples.random_fingers(rng, 3)
+    k, pre = rng.uniform(0.5, 2.0, 3), rng.uniform(0.2, 1.0, 3)
+    rows = np.array([0, 1, 2, 0, 1] if step else [0, 1, 2, 0])
+    J = g.J.reshape(3, 3, -1)[rows].reshape(3 * len(rows), -1)
+    ks = [0.4 * k[0], k[1], k[2], 0.6 * k[0], 2.0][: len(rows)]
+    ps = [0.4 * pre[0], pre[1], pre[2], 0.6 * pre[0], -2.0 * 0.1][: len(rows)]
+    parts = Grasp(g.points[rows], g.normals[rows], g.mu[rows], tangents=g.tangents[rows], J=J,
+                  R=g.R, stiffness=ks)  # fmt: skip
+    whole = Grasp(g.points, g.normals, g.mu, tangents=g.tangents, J=g.J, R=g.R, stiffness=k)
+    return parts, np.array(ps), whole, pre, examples.random_wrench(rng)
+
+
+@pytest.mark.parametrize("seed", [2, 11])
+def test_a_contact_split_at_its_point_answers_as_the_whole(seed) -> None:
+    """Two contacts at one point whose springs share a contact's stiffness and preload are
+    that contact: each answer lies in the other's bracket."""
+    parts, ps, whole, pre, d = _split(seed, step=False)
+    a = solve(parts, MaxDisturbance(d, preload=ps, commands=0.01, cap=100.0),
+              method="modesearch", time_limit=30)  # fmt: skip
+    b = solve(whole, MaxDisturbance(d, preload=pre, commands=0.01, cap=100.0),
+              method="modesearch", time_limit=30)  # fmt: skip
+    for x, y in ((a, b), (b, a)):
+        assert x.value is not None and y.upper is not None
+        _inside(x.value, y, gap=1e-3)
+
+
+@pytest.mark.parametrize("seed", [2, 11])
+def test_contacts_at_one_point_are_decided_together(seed, monkeypatch) -> None:
+    """The tree decides a contact together with the contacts at its point (some child
+    changes more than one state), and that changes no answer: with the ties switched off
+    the tree's answer lies in the tied one's bracket and the other way round."""
+    from stability.modesearch import search
+
+    parts, ps, _, _, d = _split(seed, step=True)
+    q = MaxDisturbance(d, preload=ps, commands=0.01, cap=100.0)
+    real, fired = search.Search.children, []
+
+    def counting(self, node, kind, i, x):
+        kids = real(self, node, kind, i, x)
+        for kid in kids or []:
+            changed = sum(a != b for a, b in zip(kid[0] + kid[1], node[0] + node[1], strict=True))
+            fired.append(changed > 1)
+        return kids
+
+    monkeypatch.setattr(search.Search, "children", counting)
+    tied = solve(parts, q, method="modesearch", time_limit=30)
+    assert any(fired)
+    monkeypatch.setattr(search, "colocated", lambda lp: [() for _ in range(lp.m)])
+    untied = solve(parts, q, method="modesearch", time_limit=30)
+    for x, y in ((tied, untied), (untied, tied)):
+        assert x.value is not None and y.upper is not None
+        _inside(x.value, y, gap=1e-3)
