@@ -28,7 +28,10 @@ box is flagged ``stats["at_bound"]`` and, for an optimisation query, solved agai
 Queries: ``Existence``, ``MaxDisturbance`` (maximise ``s``), ``OptimalCommands`` (the
 objectives and limits of ``refinement``), all in one solve. Options: ``time_limit`` (a
 time-out returns ``status="timeout"`` with SCIP's incumbent and dual bound in
-``stats["incumbent"]``/``stats["dual_bound"]``), ``gap`` (relative optimality gap at which
+``stats["incumbent"]``/``stats["dual_bound"]``; the incumbent is the feasible side of the
+bracket only when its point, polished, passes the exact conditions and lies against its
+slides within ``ALIGN_RTOL (1 + B)`` (``stats["incumbent_checked"]``), and then it is that
+point's value), ``gap`` (relative optimality gap at which
 SCIP stops, default 1e-4), ``bound_factor``, ``verbose``, ``normal_uncertainty`` (eta: the
 spring law uses ``d_n cos eta + s_i sin eta``, the worst normal within eta, as
 ``refinement`` does), ``motion_bound``, ``feastol`` (SCIP's feasibility tolerance, default
