@@ -4,11 +4,12 @@ evaluations in its ``eval.csv``, drawn to ``curve.png``."""
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["monitor_episodes", "monitor_returns", "plot_curve", "steps_label"]
+__all__ = ["monitor_episodes", "monitor_returns", "plot_curve", "return_label", "steps_label"]
 
 
 def monitor_episodes(run_dir: Path) -> list[dict[str, str]]:
@@ -42,8 +43,16 @@ def steps_label(x: float) -> str:
     return f"{x:g}"
 
 
+def return_label(run_dir: Path) -> str:
+    """The return axis' label: the run's training episode length (``config.json``'s
+    ``episode_steps``; 64, the main job's, when the run has none)."""
+    cfg = run_dir / "config.json"
+    steps = json.loads(cfg.read_text()).get("episode_steps", 64) if cfg.is_file() else 64
+    return f"training episode return [rad/s summed over {steps} steps]"
+
+
 def plot_curve(run_dir: Path, target_speed: float, out: Path | None = None) -> Path:
-    """curve.png: training episode return (64-step episodes, smoothed) and the evaluated
+    """curve.png: training episode return (the run's episodes, smoothed) and the evaluated
     rotation speed [rad/s, left axis] and drop rate [%, right axis] over env steps; the
     dotted line is the speed target ``target_speed`` [rad/s] (``train.rotation.TARGET_SPEED``)."""
     import matplotlib
@@ -61,7 +70,7 @@ def plot_curve(run_dir: Path, target_speed: float, out: Path | None = None) -> P
         ax[0].plot(steps[w - 1 :], smooth, color="C0", label=f"mean of {w} episodes")
         ax[0].legend(loc="lower right")
     ax[0].set_xlabel("env steps")
-    ax[0].set_ylabel("training episode return [rad/s summed over 64 steps]")
+    ax[0].set_ylabel(return_label(run_dir))
     ax[0].set_title("training return")
     ev = run_dir / "eval.csv"
     if ev.is_file():

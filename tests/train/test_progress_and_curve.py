@@ -11,7 +11,7 @@ import pytest
 from stable_baselines3.common.callbacks import BaseCallback
 
 from train import islands_ppo
-from train.curves import plot_curve, steps_label
+from train.curves import plot_curve, return_label, steps_label
 from train.sb3 import TqdmProgress, progress_bar, seed_everything
 from train.seeding import RunSeeds
 
@@ -93,6 +93,9 @@ def test_curve_step_labels_are_short(tmp_path: Path) -> None:
                                        "1600,0.4,0.1,2,1.0\n3200,0.6,0.0,2,2.0\n")  # fmt: skip
     out = plot_curve(tmp_path, 0.5)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert return_label(tmp_path).endswith("over 64 steps]")  # no config: the main job's
+    (tmp_path / "config.json").write_text('{"episode_steps": 200}')
+    assert return_label(tmp_path).endswith("over 200 steps]")
 
 
 class SlowerLater(BaseCallback):
