@@ -282,7 +282,7 @@ def _bracket(sol: Solution, data: Any, value: float | None) -> Solution:
     else:
         return sol
     align = sol.stats.get("violations", {}).get("alignment")
-    if align is not None and align > ALIGN_RTOL * (1.0 + sol.stats["force_bound"]):
+    if align is not None and align > _align_limit(sol.stats["force_bound"]):
         # the point slides a contact with friction off its slide: not an exact point, so
         # its value bounds nothing (module docstring, "Unpolished points")
         sol.stats["inexact_point"] = (
@@ -439,9 +439,7 @@ def _run(ex: CoulombModel, run: _Run, stats: dict[str, Any]) -> NDArray[np.float
                 pass
         # an exact point: the conditions of _checked and friction against each slide (the
         # optimum's alignment is judged in _bracket); its value is the polished point's
-        if x is not None and check["violations"]["alignment"] <= ALIGN_RTOL * (
-            1.0 + ex.prob.bounds.force
-        ):
+        if x is not None and check["violations"]["alignment"] <= _align_limit(ex.prob.bounds.force):
             stats["incumbent"] = ex.prob.model.objective_value(x)
             stats["incumbent_checked"] = True
             stats["box_reached"] = _box_reached(ex, x)
@@ -450,6 +448,12 @@ def _run(ex: CoulombModel, run: _Run, stats: dict[str, Any]) -> NDArray[np.float
     if res.status == "optimal" and res.x is not None:
         return _checked(ex, polish(ex, res.x, gap, stats), stats)
     raise Stop("error", f"scip: {res.status}: {res.message}")
+
+
+def _align_limit(force_bound: float) -> float:
+    """The largest ``slide_alignment`` [N] of an exact point, ``ALIGN_RTOL (1 + B)``: friction
+    off a slide by more is not an exact point (module docstring, "Unpolished points")."""
+    return ALIGN_RTOL * (1.0 + force_bound)
 
 
 def _box_reached(ex: CoulombModel, x: NDArray[np.float64]) -> bool:

@@ -180,7 +180,8 @@ def evaluate_heldout(
     for i, env in enumerate(envs):
         env.reset(seed=seed + i)
     first = np.cumsum([0] + [(n + i) // k for i in range(k)])
-    steps = int(round(seconds / envs[0].unwrapped.dt))
+    dt = float(envs[0].unwrapped.dt)
+    steps = int(round(seconds / dt))
 
     def start(i: int, j: int) -> dict[str, Any]:
         g = grasps[int(first[i] + j)]
@@ -195,7 +196,6 @@ def evaluate_heldout(
         reset_options=start,
         max_steps=steps,
     )
-    dt = float(envs[0].unwrapped.dt)
     for env in envs:
         env.close()
     res = {

@@ -58,8 +58,8 @@ class Search:
         self.together = colocated(lp)  # per contact, the others at its point
         # closed iff d_n <= p / k; compared exactly, so that round-off never ties two contacts
         # whose thresholds differ
-        k = np.asarray(lp.ex.grasp.stiffness, dtype=float).tolist()
-        pre = np.asarray(data.preload, dtype=float).tolist()
+        k = np.asarray(lp.prob.grasp.stiffness, dtype=float).tolist()
+        pre = np.asarray(lp.prob.preload, dtype=float).tolist()  # the spring rows' own
         self.closes_below = [Fraction(p) / Fraction(kk) for p, kk in zip(pre, k, strict=True)]
 
     # ------------------------------------------------------------ incumbent
